@@ -1,0 +1,323 @@
+//! The command line: thin wrappers over the core.
+//!
+//! | command | what it does |
+//! |---|---|
+//! | `demo` (default) | loads the bundled demo statue and reports on it |
+//! | `info FILE` | points, bounding box, normals present, scale estimate |
+//! | `normals IN OUT [--k 16]` | (re-)estimates oriented normals, points kept in input order |
+//! | `synth OUT.ply [--template human] [--seed N] ...` | a synthetic statue with ground truth |
+//! | `bench [--json] [--only PREFIX]` | the benchmarks (see [`crate::bench`]) |
+
+use crate::anatomy::Template;
+use crate::cloud::normals::{NormalOptions, estimate_normals, normal_agreement};
+use crate::cloud::ply::{ReadOptions, WriteOptions, read_ply_with, write_ply};
+use crate::error::{Error, Result};
+use crate::synth::{Cut, SynthOptions, generate};
+use clap::{Parser, Subcommand};
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// The bundled demo statue (CC BY 4.0, see `assets/ATTRIBUTION.md`).
+pub const DEMO_STATUE: &str = "assets/statues/statue_dancing_girl_thorvaldsen.ply";
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "pygmalion",
+    version,
+    about = "Bring scanned statues to life: anatomy registration (FAKIR), point-set skinning, virtual restoration."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Loads the bundled demo statue and reports on it (the default command).
+    Demo,
+    /// Points, bounding box, normals present, scale estimate of a PLY file.
+    Info {
+        file: PathBuf,
+        /// Drop points with NaN/inf coordinates instead of refusing the file.
+        #[arg(long)]
+        drop_non_finite: bool,
+    },
+    /// Estimates oriented normals (kNN PCA + propagation) and writes the cloud with them.
+    Normals {
+        input: PathBuf,
+        output: PathBuf,
+        /// Neighbours per point.
+        #[arg(long, default_value_t = 16)]
+        k: usize,
+        /// Drop points with NaN/inf coordinates instead of refusing the file.
+        #[arg(long)]
+        drop_non_finite: bool,
+    },
+    /// Writes a synthetic statue sampled on a posed template, with its ground truth.
+    Synth {
+        output: PathBuf,
+        /// Template name (human, centaur, quadruped, mermaid) or template file.
+        #[arg(long, default_value = "human")]
+        template: String,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Number of points sampled on the envelope (before cuts).
+        #[arg(long, default_value_t = 30_000)]
+        points: usize,
+        /// Keep the rest pose (no random pose).
+        #[arg(long)]
+        rest: bool,
+        /// Proportion jitter per bone (0.3 = ±30%).
+        #[arg(long, default_value_t = 0.3)]
+        jitter: f32,
+        /// Height of the statue.
+        #[arg(long, default_value_t = 1.0)]
+        height: f32,
+        /// Gaussian noise along the normal (standard deviation).
+        #[arg(long, default_value_t = 0.0)]
+        noise: f32,
+        /// Poisson noise parameter λ.
+        #[arg(long, default_value_t = 0.0)]
+        poisson: f32,
+        /// A cut: `bone:NAME[@FRACTION]` or `plane:px,py,pz,nx,ny,nz` (repeatable).
+        #[arg(long)]
+        cut: Vec<String>,
+        /// Apply a random rigid transform.
+        #[arg(long)]
+        rigid: bool,
+        /// Write the ground-truth skeleton (JSON) here.
+        #[arg(long)]
+        truth: Option<PathBuf>,
+        /// Also write each point's bone index as a `bone` property.
+        #[arg(long)]
+        labels: bool,
+    },
+    /// Runs the benchmarks.
+    Bench {
+        /// One JSON object per line.
+        #[arg(long)]
+        json: bool,
+        /// Only benchmarks whose name starts with this prefix.
+        #[arg(long)]
+        only: Option<String>,
+        /// Timed runs per benchmark.
+        #[arg(long, default_value_t = 5)]
+        runs: usize,
+    },
+}
+
+/// Runs the command line with these arguments (the first is the program name).
+pub fn run<I, T>(args: I) -> Result<()>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    let cli = match Cli::try_parse_from(args) {
+        Ok(c) => c,
+        Err(e) => {
+            // --help and --version are not errors.
+            let code = e.exit_code();
+            let _ = e.print();
+            if code == 0 {
+                return Ok(());
+            }
+            return Err(Error::input("invalid command line (see above)"));
+        }
+    };
+    match cli.command.unwrap_or(Command::Demo) {
+        Command::Demo => demo(),
+        Command::Info {
+            file,
+            drop_non_finite,
+        } => info(&file, drop_non_finite),
+        Command::Normals {
+            input,
+            output,
+            k,
+            drop_non_finite,
+        } => normals(&input, &output, k, drop_non_finite),
+        Command::Synth {
+            output,
+            template,
+            seed,
+            points,
+            rest,
+            jitter,
+            height,
+            noise,
+            poisson,
+            cut,
+            rigid,
+            truth,
+            labels,
+        } => {
+            let cuts = cut
+                .iter()
+                .map(|c| Cut::parse(c))
+                .collect::<Result<Vec<_>>>()?;
+            let opts = SynthOptions {
+                points,
+                seed,
+                random_pose: !rest,
+                proportion_jitter: jitter,
+                height,
+                noise_sigma: noise,
+                poisson_lambda: poisson,
+                cuts,
+                rigid,
+            };
+            synth(&output, &template, &opts, truth.as_deref(), labels)
+        }
+        Command::Bench { json, only, runs } => crate::bench::run_cli(json, only.as_deref(), runs),
+    }
+}
+
+fn read(path: &Path, drop_non_finite: bool) -> Result<crate::cloud::PointCloud> {
+    Ok(read_ply_with(
+        path,
+        &ReadOptions {
+            drop_non_finite,
+            ..Default::default()
+        },
+    )?)
+}
+
+fn info(path: &Path, drop_non_finite: bool) -> Result<()> {
+    let t = Instant::now();
+    let cloud = read(path, drop_non_finite)?;
+    let bb = cloud
+        .bounding_box()
+        .ok_or_else(|| Error::input(format!("{}: no points", path.display())))?;
+    println!("file:        {}", path.display());
+    println!("points:      {}", cloud.len());
+    println!(
+        "normals:     {}",
+        if cloud.normals.is_some() {
+            "present"
+        } else {
+            "absent"
+        }
+    );
+    println!(
+        "colours:     {}",
+        if cloud.colors.is_some() {
+            "present"
+        } else {
+            "absent"
+        }
+    );
+    println!(
+        "bbox min:    [{:.6}, {:.6}, {:.6}]",
+        bb.min.x, bb.min.y, bb.min.z
+    );
+    println!(
+        "bbox max:    [{:.6}, {:.6}, {:.6}]",
+        bb.max.x, bb.max.y, bb.max.z
+    );
+    println!(
+        "bbox size:   [{:.6}, {:.6}, {:.6}]",
+        bb.size().x,
+        bb.size().y,
+        bb.size().z
+    );
+    println!(
+        "scale:       {:.6} (largest bounding-box edge)",
+        cloud.scale_estimate()
+    );
+    println!("read in:     {:.3} s", t.elapsed().as_secs_f64());
+    Ok(())
+}
+
+fn normals(input: &Path, output: &Path, k: usize, drop_non_finite: bool) -> Result<()> {
+    let mut cloud = read(input, drop_non_finite)?;
+    let t = Instant::now();
+    let est = estimate_normals(
+        &cloud.positions,
+        &NormalOptions {
+            k,
+            ..Default::default()
+        },
+    )
+    .map_err(|e| Error::input(format!("{}: {e}", input.display())))?;
+    let secs = t.elapsed().as_secs_f64();
+    if let Some(old) = &cloud.normals {
+        let a = normal_agreement(&est, old);
+        println!(
+            "compared with the file's normals: {:.2}% agree in sign, median angle {:.2}°",
+            100.0 * a.sign_agreement,
+            a.median_angle_deg
+        );
+    }
+    cloud.normals = Some(est);
+    write_ply(output, &cloud, &WriteOptions::default())?;
+    println!(
+        "{} points, normals estimated in {secs:.3} s (k = {k}) → {}",
+        cloud.len(),
+        output.display()
+    );
+    Ok(())
+}
+
+fn synth(
+    output: &Path,
+    template: &str,
+    opts: &SynthOptions,
+    truth: Option<&Path>,
+    labels: bool,
+) -> Result<()> {
+    let t = Arc::new(Template::resolve(template)?);
+    let s = generate(t, opts)?;
+    let mut w = WriteOptions::default();
+    if labels {
+        w.labels = Some(("bone".to_string(), s.labels.clone()));
+    }
+    write_ply(output, &s.cloud, &w)?;
+    if let Some(path) = truth {
+        s.truth.save_json(path)?;
+    }
+    println!(
+        "{} points of a synthetic '{}' (seed {}) → {}{}",
+        s.cloud.len(),
+        template,
+        opts.seed,
+        output.display(),
+        truth
+            .map(|p| format!(", ground truth → {}", p.display()))
+            .unwrap_or_default()
+    );
+    Ok(())
+}
+
+fn demo() -> Result<()> {
+    let path = Path::new(DEMO_STATUE);
+    if !path.exists() {
+        return Err(Error::input(format!(
+            "{}: the demo statue is missing (run from the repository root)",
+            path.display()
+        )));
+    }
+    println!("Pygmalion demo: Thorvaldsen's Dancing Girl (scan by Geoffrey Marchal, CC BY 4.0)\n");
+    info(path, false)?;
+    let cloud = read(path, false)?;
+    let t = Instant::now();
+    let est = estimate_normals(&cloud.positions, &NormalOptions::default())?;
+    let secs = t.elapsed().as_secs_f64();
+    if let Some(old) = &cloud.normals {
+        let a = normal_agreement(&est, old);
+        println!(
+            "\nnormals re-estimated in {secs:.3} s: {:.2}% agree in sign with the scan's, median angle {:.2}°",
+            100.0 * a.sign_agreement,
+            a.median_angle_deg
+        );
+    }
+    let template = Template::builtin("human")?;
+    println!(
+        "template '{}': {} bones in {} chains",
+        template.name,
+        template.bones.len(),
+        template.chains.len()
+    );
+    Ok(())
+}

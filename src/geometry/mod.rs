@@ -1,0 +1,6 @@
+//! Geometry of the sphere-mesh model: the bone ([`bone`]) and rotation helpers ([`frames`]).
+
+pub mod bone;
+pub mod frames;
+
+pub use bone::{Bone, Part, PreparedBone, Projection};

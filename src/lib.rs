@@ -1,0 +1,37 @@
+//! # Pygmalion
+//!
+//! Bring scanned statues to life: fit a simple articulated sphere-mesh anatomy to a raw point
+//! set (FAKIR), re-pose it with point-set skinning, and restore broken statues by borrowing
+//! limbs from others.
+//!
+//! ## The pipeline (data flows one way)
+//!
+//! ```text
+//! PLY file ─► PointCloud ─► Registration (FAKIR) ─► FittedSkeleton ─► Binding ─► deform(pose) ─► skinned points ─► render
+//! ```
+//!
+//! ## Modules (the bevy-free core)
+//!
+//! | module | what lives there |
+//! |---|---|
+//! | [`cloud`] | [`cloud::PointCloud`] (structure of arrays), PLY in/out ([`cloud::ply`]), normal estimation ([`cloud::normals`]) |
+//! | [`geometry`] | the sphere-mesh bone ([`geometry::Bone`]): orthogonal and normal-constrained projection, distances, surface sampling |
+//! | [`anatomy`] | templates loaded from `config/templates/`, the skeleton state, forward kinematics, fitted-skeleton JSON |
+//! | [`synth`] | synthetic statues with ground truth (tests and benches) |
+//! | [`bench`] | the `pygmalion bench` harness |
+//!
+//! The core uses only `bevy::math` (glam) from Bevy; the CLI (`src/main.rs`, [`cli`]) is a thin
+//! wrapper over it.
+
+pub mod anatomy;
+pub mod bench;
+pub mod cli;
+pub mod cloud;
+pub mod error;
+pub mod geometry;
+pub mod rng;
+pub mod synth;
+
+/// The one linear-algebra crate of the project: glam, as re-exported by Bevy.
+pub use bevy::math;
+pub use error::{Error, Result};

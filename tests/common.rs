@@ -1,0 +1,42 @@
+//! Shared helpers of the integration tests.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+
+/// The crate root.
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// `assets/statues/` (bundled CC BY scans).
+pub fn statues_dir() -> PathBuf {
+    root().join("assets/statues")
+}
+
+/// The real data folder for the extended run, when `PYGMALION_DATA` names an existing folder.
+pub fn shared_data() -> Option<PathBuf> {
+    let dir = PathBuf::from(std::env::var_os("PYGMALION_DATA")?);
+    dir.is_dir().then_some(dir)
+}
+
+/// Every `.ply` file of the extended data set (empty when the extended run is off).
+pub fn shared_plys() -> Vec<PathBuf> {
+    let Some(dir) = shared_data() else {
+        return Vec::new();
+    };
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .expect("read PYGMALION_DATA")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "ply"))
+        .collect();
+    files.sort();
+    files
+}
+
+/// A fresh scratch directory under the target directory, unique per test name.
+pub fn scratch(name: &str) -> PathBuf {
+    let dir = root().join("target/test-scratch").join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("create scratch dir");
+    dir
+}

@@ -1,0 +1,14 @@
+//! The one integration-test binary of Pygmalion (every extra test binary would link Bevy
+//! again). Modules mirror `src/`.
+//!
+//! Checks over the whole real data set (`../shared/data`) run only when the environment
+//! variable `PYGMALION_DATA` names that folder (`.ci/run` sets it when the folder exists);
+//! everything else runs on bundled assets and synthetic statues.
+
+mod common;
+
+mod anatomy;
+mod cloud_normals;
+mod cloud_ply;
+mod geometry_bone;
+mod synth;
