@@ -28,6 +28,7 @@ pub mod bench;
 pub mod cli;
 pub mod cloud;
 pub mod error;
+pub mod fakir;
 pub mod geometry;
 pub mod rng;
 pub mod synth;

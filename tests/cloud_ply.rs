@@ -446,6 +446,162 @@ fn ascii_mesh_gives_its_vertices() {
     );
 }
 
+/// Header lines ply-rs parses: comments and obj_info anywhere (also non-UTF-8 ones), CRLF,
+/// blank lines, stray spaces and tabs, and the integer type aliases.
+#[test]
+fn header_with_comments_blank_lines_and_type_aliases() {
+    let mut bytes = b"ply\r\nformat binary_little_endian 1.0 \r\ncomment caf\xe9 \xff\r\n".to_vec();
+    bytes.extend_from_slice(
+        b"\r\n  obj_info scanner 3\r\ncomment\r\nelement vertex 2\r\n\
+          property float32 x\r\nproperty\tfloat64  y\r\ncomment between properties\r\n\
+          property int16 z\r\nproperty uint8 intensity\r\n   \r\nend_header\r\n",
+    );
+    for (x, y, z, i) in [(1.5f32, -2.0f64, 7i16, 9u8), (0.25, 1e10, -3, 200)] {
+        bytes.extend_from_slice(&x.to_le_bytes());
+        bytes.extend_from_slice(&y.to_le_bytes());
+        bytes.extend_from_slice(&z.to_le_bytes());
+        bytes.push(i);
+    }
+    let name = Path::new("comments.ply");
+    let cloud = read_ply_bytes(name, &bytes, &ReadOptions::default()).unwrap();
+    assert_eq!(
+        cloud.positions,
+        vec![Vec3::new(1.5, -2.0, 7.0), Vec3::new(0.25, 1e10, -3.0)]
+    );
+    // Ascii line numbers still count the blank header lines.
+    let text = "ply\nformat ascii 1.0\n\ncomment x\n\nelement vertex 2\nproperty float x\n\
+                property float y\nproperty float z\nend_header\n0 0 0\n1 q 1\n";
+    let e = read_ply_bytes(name, text.as_bytes(), &ReadOptions::default()).unwrap_err();
+    assert!(
+        matches!(e.problem, PlyProblem::BadValue { line: 12, .. }),
+        "{e}"
+    );
+    // A rejected header line names its line and carries ply-rs's reason.
+    let text = "ply\nformat ascii 1.0\n\nelement vertex 1\nproperty float x y\nend_header\n";
+    let e = read_ply_bytes(name, text.as_bytes(), &ReadOptions::default()).unwrap_err();
+    let message = e.to_string();
+    assert!(
+        message.contains("line 5: garbled property line"),
+        "{message}"
+    );
+    assert!(message.contains("ply-rs"), "{message}");
+}
+
+/// Files written entirely by ply-rs (header and payload, through its `DefaultElement`) read
+/// back through our reader, in the three formats, with a face element before the vertices.
+#[test]
+fn reads_files_written_by_ply_rs() {
+    use ply_rs::ply::{
+        Addable, DefaultElement, ElementDef, Encoding, Ply, Property, PropertyDef, PropertyType,
+        ScalarType,
+    };
+    let points = [
+        [0.5f32, -1.25, 3.0],
+        [1e-3, 2.0, -7.5],
+        [f32::MAX, f32::MIN_POSITIVE, 0.0],
+    ];
+    for encoding in [
+        Encoding::Ascii,
+        Encoding::BinaryLittleEndian,
+        Encoding::BinaryBigEndian,
+    ] {
+        let mut ply = Ply::<DefaultElement>::new();
+        ply.header.encoding = encoding;
+        ply.header.comments.push("from ply-rs".into());
+        ply.header.obj_infos.push("cross-check".into());
+        let mut face = ElementDef::new("face".into());
+        face.properties.add(PropertyDef::new(
+            "vertex_indices".into(),
+            PropertyType::List(ScalarType::UChar, ScalarType::Int),
+        ));
+        ply.header.elements.add(face);
+        let mut vertex = ElementDef::new("vertex".into());
+        for name in ["x", "y", "z", "red", "green", "blue"] {
+            let ty = if name.len() == 1 {
+                ScalarType::Float
+            } else {
+                ScalarType::UChar
+            };
+            vertex
+                .properties
+                .add(PropertyDef::new(name.into(), PropertyType::Scalar(ty)));
+        }
+        ply.header.elements.add(vertex);
+        // Three faces of three indices: ply-rs 0.1.3's binary writer writes the element
+        // count as the length of every list, so only lists that long come out right.
+        let faces = (0..3)
+            .map(|i| {
+                let mut f = DefaultElement::new();
+                f.insert("vertex_indices".into(), Property::ListInt(vec![i, 1, 2]));
+                f
+            })
+            .collect();
+        ply.payload.insert("face".into(), faces);
+        let vertices = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let mut v = DefaultElement::new();
+                for (k, name) in ["x", "y", "z"].into_iter().enumerate() {
+                    v.insert(name.into(), Property::Float(p[k]));
+                }
+                for (k, name) in ["red", "green", "blue"].into_iter().enumerate() {
+                    v.insert(name.into(), Property::UChar((i * 100 + k) as u8));
+                }
+                v
+            })
+            .collect();
+        ply.payload.insert("vertex".into(), vertices);
+        let mut bytes = Vec::new();
+        ply_rs::writer::Writer::new()
+            .write_ply(&mut bytes, &mut ply)
+            .unwrap();
+        let cloud = read_ply_bytes(Path::new("ply_rs.ply"), &bytes, &ReadOptions::default())
+            .unwrap_or_else(|e| panic!("{encoding:?}: {e}"));
+        let expected: Vec<Vec3> = points.iter().map(|p| Vec3::from_array(*p)).collect();
+        assert_eq!(bits(&cloud.positions), bits(&expected), "{encoding:?}");
+        assert_eq!(
+            cloud.colors.unwrap(),
+            vec![[0, 1, 2], [100, 101, 102], [200, 201, 202]],
+            "{encoding:?}"
+        );
+    }
+    // And ply-rs reads what we write, header and payload.
+    let cloud = random_cloud(20, true, true);
+    let labels: Vec<u32> = (0..20).collect();
+    let opts = WriteOptions {
+        colors: true,
+        labels: Some(("bone".into(), labels)),
+    };
+    let mut bytes = Vec::new();
+    write_ply_to(&mut bytes, &cloud, &opts).unwrap();
+    let ply = ply_rs::parser::Parser::<DefaultElement>::new()
+        .read_ply(&mut bytes.as_slice())
+        .unwrap();
+    assert_eq!(ply.header.encoding, Encoding::BinaryLittleEndian);
+    let vertices = &ply.payload["vertex"];
+    assert_eq!(vertices.len(), 20);
+    for (i, v) in vertices.iter().enumerate() {
+        assert_eq!(v["x"], Property::Float(cloud.positions[i].x));
+        assert_eq!(
+            v["nz"],
+            Property::Float(cloud.normals.as_ref().unwrap()[i].z)
+        );
+        assert_eq!(
+            v["blue"],
+            Property::UChar(cloud.colors.as_ref().unwrap()[i][2])
+        );
+        assert_eq!(v["bone"], Property::Int(i as i32));
+    }
+    // A label name ply-rs could not read back is refused.
+    let opts = WriteOptions {
+        colors: true,
+        labels: Some(("2nd".into(), vec![0; 20])),
+    };
+    let e = write_ply_to(&mut Vec::new(), &cloud, &opts).unwrap_err();
+    assert!(matches!(e, PlyProblem::Inconsistent(_)), "{e}");
+}
+
 #[test]
 fn non_finite_points_can_be_dropped() {
     let dir = scratch("cloud_ply_drop");
@@ -844,6 +1000,53 @@ fn corpus() -> Vec<Case> {
     );
     missing.options.require_normals = true;
     cases.push(missing);
+    // Headers that ply-rs alone would misread or choke on.
+    cases.push(case(
+        "count_overflows_u64",
+        "ply\nformat ascii 1.0\nelement vertex 99999999999999999999\nproperty float x\n\
+         end_header\n",
+        |p| matches!(p, PlyProblem::BadHeader(_)),
+        "line 3",
+    ));
+    cases.push(case(
+        "version_256",
+        xyz("ascii", 1).replace("1.0", "256.0") + "0 0 0\n",
+        |p| matches!(p, PlyProblem::BadHeader(_)),
+        "unsupported PLY version",
+    ));
+    cases.push(case(
+        "duplicate_property",
+        "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\n\
+         property float y\nproperty float z\nproperty float x\nend_header\n0000111122223333",
+        |p| matches!(p, PlyProblem::BadHeader(_)),
+        "line 7: a second property named \"x\"",
+    ));
+    cases.push(case(
+        "duplicate_element",
+        "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
+         property float z\nelement face 0\nelement vertex 1\nproperty float x\n\
+         property float y\nproperty float z\nend_header\n0 0 0\n1 1 1\n",
+        |p| matches!(p, PlyProblem::BadHeader(_)),
+        "line 8: a second element named \"vertex\"",
+    ));
+    cases.push(case(
+        "list_count_is_float",
+        "ply\nformat ascii 1.0\nelement face 1\nproperty list float int vertex_indices\n\
+         element vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n\
+         3 0 1 2\n0 0 0\n",
+        |p| matches!(p, PlyProblem::BadHeader(_)),
+        "line 4",
+    ));
+    let mut no_end = Bytes::new(&xyz(le, 1000).replace("end_header\n", ""), false);
+    for i in 0..1000 {
+        no_end.f32s(&[i as f32, 1.0, 2.0]);
+    }
+    cases.push(case(
+        "binary_without_end_header",
+        no_end.take(),
+        |p| matches!(p, PlyProblem::BadHeader(_)),
+        "end_header",
+    ));
     cases
 }
 

@@ -362,3 +362,116 @@ fn surface_sampling_is_area_uniform() {
         "cone halves ratio {ratio}"
     );
 }
+
+/// Finite-difference check of `Projection::gradient` (the basis of every LM derivative).
+#[test]
+fn residual_gradient_matches_finite_differences() {
+    let mut rng = Rng::new(8);
+    let mut checked = 0;
+    for i in 0..300 {
+        let bone = random_bone(&mut rng, i % 3); // no very thin bones: curvature ~ 1/r
+        for _ in 0..20 {
+            let p = random_point_near(&mut rng, &bone);
+            let n = if rng.f32() < 0.5 {
+                rng.unit_vector()
+            } else {
+                Vec3::ZERO
+            };
+            let base = bone.project_constrained(p, n);
+            let g = base.gradient();
+            let h = 1e-3 * bone.size();
+            // Near the axis (or a sphere centre) the radial direction is not smooth.
+            let (_, y, _) = bone.prepare().local(p);
+            if y < 20.0 * h
+                || (p - bone.c1).length() < 20.0 * h
+                || (p - bone.c2).length() < 20.0 * h
+            {
+                continue;
+            }
+            let eval = |b: Bone| {
+                let q = b.project_constrained(p, n);
+                // Finite differences only where the projection case does not change.
+                (q.flipped == base.flipped
+                    && q.part == base.part
+                    && q.on_surface == base.on_surface)
+                    .then_some(q.residual)
+            };
+            let mut check = |plus: Bone, minus: Bone, analytic: f32| {
+                if let (Some(a), Some(b)) = (eval(plus), eval(minus)) {
+                    let fd = (a - b) / (2.0 * h);
+                    assert!(
+                        (fd - analytic).abs() <= 2e-2 * (1.0 + analytic.abs()),
+                        "bone {bone:?} p {p} n {n}: fd {fd} vs {analytic} ({base:?})"
+                    );
+                    checked += 1;
+                }
+            };
+            for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+                check(
+                    Bone {
+                        c1: bone.c1 + h * axis,
+                        ..bone
+                    },
+                    Bone {
+                        c1: bone.c1 - h * axis,
+                        ..bone
+                    },
+                    g.dc1.dot(axis),
+                );
+                check(
+                    Bone {
+                        c2: bone.c2 + h * axis,
+                        ..bone
+                    },
+                    Bone {
+                        c2: bone.c2 - h * axis,
+                        ..bone
+                    },
+                    g.dc2.dot(axis),
+                );
+            }
+            check(
+                Bone {
+                    r1: bone.r1 + h,
+                    ..bone
+                },
+                Bone {
+                    r1: bone.r1 - h,
+                    ..bone
+                },
+                g.dr1,
+            );
+            check(
+                Bone {
+                    r2: bone.r2 + h,
+                    ..bone
+                },
+                Bone {
+                    r2: bone.r2 - h,
+                    ..bone
+                },
+                g.dr2,
+            );
+        }
+    }
+    assert!(checked > 20_000, "only {checked} derivatives checked");
+}
+
+#[test]
+fn rotation_arc_keeps_small_angles() {
+    use pygmalion::geometry::frames::rotation_arc;
+    let a = Vec3::new(1.0, 0.2, -0.3).normalize();
+    for angle in [1e-6f32, 1e-5, 1e-4, 1e-3, 0.5, 3.0] {
+        let axis = a.any_orthonormal_vector();
+        let b = pygmalion::math::Quat::from_axis_angle(axis, angle) * a;
+        let q = rotation_arc(a, b);
+        assert!((q * a - b).length() < 1e-6, "angle {angle}");
+        assert!(
+            (q.to_axis_angle().1 - angle).abs() < 1e-5 * angle.max(1.0),
+            "angle {angle}: {}",
+            q.to_axis_angle().1
+        );
+    }
+    assert!((rotation_arc(a, -a) * a + a).length() < 1e-5);
+    assert_eq!(rotation_arc(a, a), pygmalion::math::Quat::IDENTITY);
+}

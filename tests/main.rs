@@ -10,5 +10,6 @@ mod common;
 mod anatomy;
 mod cloud_normals;
 mod cloud_ply;
+mod fakir;
 mod geometry_bone;
 mod synth;

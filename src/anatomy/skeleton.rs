@@ -269,7 +269,7 @@ impl Skeleton {
                 Some(q) => Quat::from_array(q).normalize(),
                 None => {
                     let rest_axis = rest_f[i] * Vec3::X;
-                    Quat::from_rotation_arc(rest_axis, (c2 - c1).normalize_or(rest_axis))
+                    crate::geometry::frames::rotation_arc(rest_axis, (c2 - c1).normalize_or(rest_axis))
                         * rest_f[i]
                 }
             };

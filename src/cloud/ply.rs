@@ -21,7 +21,47 @@
 //!   its vertices. Elements that come *before* the vertex element are walked record by record
 //!   (binary list properties included) to find where the vertices start; data *after* the vertex
 //!   element is never examined, so a mesh whose face data is damaged still gives its vertices.
-//!   When the header declares several `vertex` elements, the first one is read.
+//!   Element names, and property names within an element, must be unique (a header that
+//!   repeats one is a [`PlyProblem::BadHeader`]).
+//!
+//! ## What ply-rs does, and what this module does
+//!
+//! The header is parsed by [ply-rs](https://crates.io/crates/ply-rs)
+//! (`ply_rs::parser::Parser::read_header`); the `Header` it returns (encoding, and the
+//! elements with their counts and property types, in file order) is the only source of the
+//! layout the payload is decoded with. Around it:
+//!
+//! 1. **Byte-level checks first**: an empty file ([`PlyProblem::EmptyFile`]), a first line
+//!    that is not `ply` ([`PlyProblem::NotPly`]), and the header lines up to the first
+//!    `end_header` line, looked for in at most the first 1 MiB. Blank lines are dropped, lines
+//!    are trimmed and invalid UTF-8 (in comments) is replaced before ply-rs sees them: ply-rs
+//!    rejects blank or indented lines, and fails on a file that is not UTF-8 throughout. Counts
+//!    and version numbers too large for `u64` are refused here, because ply-rs's grammar
+//!    `unwrap`s their parse (it would panic), and the version must be 1.0, because ply-rs
+//!    casts it to `u16`/`u8` (`256.0` would pass as `0.0`). The parse is also wrapped in
+//!    `catch_unwind`, so a ply-rs panic that slipped through would still be a `BadHeader`.
+//! 2. **ply-rs parses the header.** When it rejects a line, the error gives that line's number
+//!    in the file and, where one can be given, a more specific reason than ply-rs's "Couldn't
+//!    parse line" (an unknown type or format, a count that is not a whole number, a property
+//!    before any element, data where the `end_header` line is missing), followed by ply-rs's
+//!    own message in brackets. This explanation is only a diagnosis of a line ply-rs refused;
+//!    it never decides what a header means.
+//! 3. **Checks ply-rs does not make**: ply-rs keys elements and properties by name in a map,
+//!    so a repeated name would silently replace (or move) the earlier declaration and shift the
+//!    record layout; the number of `element`/`property` lines is compared with what ply-rs
+//!    returned, and a repeat is a `BadHeader`. A list whose count type is `float` or `double`
+//!    (which ply-rs's grammar accepts) is a `BadHeader` too.
+//!
+//! The **payload is decoded by this module**, not by ply-rs's `read_payload`, which
+//! (version 0.1.3) builds one `DefaultElement` (a linked hash map with one `String` key per
+//! property) for every record of every element in the file: several heap allocations per
+//! point, far too slow and memory-hungry for millions of points, and the faces after the
+//! vertices must be intact too. It does not preallocate by the header's counts, but it loops
+//! over them unchecked (a negative binary list length becomes an enormous `usize`), its
+//! ascii reader wants exactly one record per line and refuses `nan`/`inf`, and its errors do
+//! not say which element or record failed. The decoder here works on the bytes in memory,
+//! checks every count against the bytes left before allocating, and reports the problems
+//! below.
 //!
 //! ## Options ([`ReadOptions`])
 //!
@@ -55,7 +95,7 @@
 //! | [`IsDirectory`](PlyProblem::IsDirectory) | the path is a directory |
 //! | [`EmptyFile`](PlyProblem::EmptyFile) | the file has 0 bytes |
 //! | [`NotPly`](PlyProblem::NotPly) | the first line is not `ply` |
-//! | [`BadHeader`](PlyProblem::BadHeader) | a header line is garbled or unsupported (unknown format, version, keyword or type, a count that is not a whole number, a property before any element, no `format` line, no `end_header` line) |
+//! | [`BadHeader`](PlyProblem::BadHeader) | ply-rs rejects the header, or it is unsupported (a garbled line, unknown format, version other than 1.0, unknown keyword or type, a count that is not a whole number or is too large, a property before any element, no `format` line, no `end_header` line, a repeated element or property name, a list with a floating-point count type) |
 //! | [`NoVertexElement`](PlyProblem::NoVertexElement) | the header declares no `vertex` element |
 //! | [`MissingCoordinate`](PlyProblem::MissingCoordinate) | the vertex element has no `x`, `y` or `z` scalar property |
 //! | [`CountExceedsData`](PlyProblem::CountExceedsData) | an element's declared count cannot fit in the bytes that remain (checked before reading) |
@@ -75,7 +115,13 @@
 //! [`write_ply`] writes a `binary_little_endian` PLY with one `vertex` element: `float x, y, z`;
 //! `float nx, ny, nz` when the cloud has normals; `uchar red, green, blue` when the cloud has
 //! colours and [`WriteOptions::colors`] is set; and optionally one `int` property per point
-//! named by [`WriteOptions::labels`] (e.g. `bone` labels of a registration). The file is
+//! named by [`WriteOptions::labels`] (e.g. `bone` labels of a registration; the name must be a
+//! PLY identifier that ply-rs reads back: a letter or `_`, then letters, digits, `_` or `-`).
+//! The header is written by ply-rs (`ply_rs::writer::Writer::write_header`, into memory,
+//! then passed on with one `write_all`: ply-rs uses `Write::write`, which may write only part
+//! of its input on other writers); the records are written by this module in chunks of about
+//! 1 MiB (ply-rs's payload writer would need one `DefaultElement` per point, and version
+//! 0.1.3 writes the element count as the length of every binary list). The file is
 //! written to a temporary sibling and renamed into place, so a failed write never leaves a half
 //! file where a good one was. [`write_ply_to`] writes the same bytes to any writer.
 
@@ -468,41 +514,78 @@ fn bad_header(line: usize, why: impl fmt::Display) -> PlyProblem {
     PlyProblem::BadHeader(format!("line {line}: {why}"))
 }
 
-/// Shortens a header line for an error message.
+/// Shortens a header line for an error message (control characters escaped).
 fn quote(line: &str) -> String {
-    let short: String = line.chars().take(60).collect();
-    if short.len() < line.len() {
+    let mut short = String::new();
+    for c in line.chars().take(60) {
+        if c.is_control() {
+            short.extend(c.escape_default());
+        } else {
+            short.push(c);
+        }
+    }
+    if line.chars().nth(60).is_some() {
         format!("\"{short}...\"")
     } else {
         format!("\"{short}\"")
     }
 }
 
-fn parse_header(bytes: &[u8]) -> Result<Header, PlyProblem> {
+/// The most bytes looked at for the header (real headers are a few hundred bytes; this bounds
+/// the work on a binary file that has no `end_header` line).
+const MAX_HEADER_BYTES: usize = 1 << 20;
+
+/// One non-blank header line after the `ply` line: its number in the file (1-based) and its
+/// text, trimmed, with invalid UTF-8 replaced (only comments can hold such bytes usefully).
+struct HeaderLine {
+    number: usize,
+    text: String,
+}
+
+impl HeaderLine {
+    /// The words as ply-rs separates them (spaces and tabs).
+    fn words(&self) -> Vec<&str> {
+        self.text
+            .split([' ', '\t'])
+            .filter(|w| !w.is_empty())
+            .collect()
+    }
+
+    fn keyword(&self) -> &str {
+        self.words().first().copied().unwrap_or("")
+    }
+}
+
+/// The header lines, cut by byte-level checks only.
+struct HeaderText {
+    lines: Vec<HeaderLine>,
+    /// Byte offset and line number of the data, when an `end_header` line was found.
+    body: Option<(usize, usize)>,
+    /// Whether the search for `end_header` stopped at [`MAX_HEADER_BYTES`].
+    capped: bool,
+}
+
+/// Byte-level checks: not empty, first line `ply`, and the lines up to the first
+/// `end_header` line (or [`MAX_HEADER_BYTES`], or the end of the file).
+fn split_header(bytes: &[u8]) -> Result<HeaderText, PlyProblem> {
     if bytes.is_empty() {
         return Err(PlyProblem::EmptyFile);
     }
+    let head = &bytes[..bytes.len().min(MAX_HEADER_BYTES)];
+    let mut lines = Vec::new();
     let mut pos = 0usize;
-    let mut line_no = 0usize;
-    let mut format: Option<Format> = None;
-    let mut elements: Vec<Element> = Vec::new();
-    loop {
-        if pos >= bytes.len() {
-            return Err(if line_no == 0 {
-                PlyProblem::NotPly
-            } else {
-                PlyProblem::BadHeader("the header has no end_header line".into())
-            });
-        }
-        let rest = &bytes[pos..];
-        let (raw, next) = match rest.iter().position(|&b| b == b'\n') {
-            Some(i) => (&rest[..i], pos + i + 1),
-            None => (rest, bytes.len()),
+    let mut number = 0usize;
+    while pos < head.len() {
+        let rest = &head[pos..];
+        let (raw, next, whole) = match rest.iter().position(|&b| b == b'\n') {
+            Some(i) => (&rest[..i], pos + i + 1, true),
+            // The last line of the file, or a line cut by the byte limit.
+            None => (rest, head.len(), head.len() == bytes.len()),
         };
         pos = next;
-        line_no += 1;
+        number += 1;
         let raw = raw.strip_suffix(b"\r").unwrap_or(raw);
-        if line_no == 1 {
+        if number == 1 {
             if raw.trim_ascii() == b"ply" {
                 continue;
             }
@@ -514,152 +597,384 @@ fn parse_header(bytes: &[u8]) -> Result<Header, PlyProblem> {
             }
             return Err(PlyProblem::NotPly);
         }
-        let text = String::from_utf8_lossy(raw);
-        let words: Vec<&str> = text.split_ascii_whitespace().collect();
-        let Some(&keyword) = words.first() else {
+        let trimmed = raw.trim_ascii();
+        if trimmed.is_empty() {
             continue;
-        };
-        match keyword {
-            "comment" | "obj_info" => {}
-            "end_header" => {
-                if words.len() != 1 {
-                    return Err(bad_header(
-                        line_no,
-                        format!("garbled line {}", quote(&text)),
-                    ));
-                }
-                let Some(format) = format else {
-                    return Err(PlyProblem::BadHeader(
-                        "the header has no format line".into(),
-                    ));
-                };
-                return Ok(Header {
-                    format,
-                    elements,
-                    body_start: pos,
-                    body_line: line_no + 1,
-                });
-            }
-            "format" => {
-                if words.len() != 3 {
-                    return Err(bad_header(
-                        line_no,
-                        format!("garbled format line {}", quote(&text)),
-                    ));
-                }
-                if format.is_some() {
-                    return Err(bad_header(line_no, "a second format line"));
-                }
-                format = Some(match words[1] {
-                    "ascii" => Format::Ascii,
-                    "binary_little_endian" => Format::BinaryLittleEndian,
-                    "binary_big_endian" => Format::BinaryBigEndian,
-                    other => {
-                        return Err(bad_header(
-                            line_no,
-                            format!(
-                                "unknown format {} (expected ascii, binary_little_endian or \
-                                 binary_big_endian)",
-                                quote(other)
-                            ),
-                        ));
-                    }
-                });
-                if words[2] != "1.0" && words[2] != "1" {
-                    return Err(bad_header(
-                        line_no,
-                        format!("unsupported PLY version {} (expected 1.0)", quote(words[2])),
-                    ));
-                }
-            }
-            "element" => {
-                if words.len() != 3 {
-                    return Err(bad_header(
-                        line_no,
-                        format!(
-                            "garbled element line {} (expected: element NAME COUNT)",
-                            quote(&text)
-                        ),
-                    ));
-                }
-                let count: u64 = words[2].parse().map_err(|_| {
-                    bad_header(
-                        line_no,
-                        format!(
-                            "the count of element {} is not a whole number: {}",
-                            words[1],
-                            quote(words[2])
-                        ),
-                    )
-                })?;
-                elements.push(Element {
-                    name: words[1].to_string(),
-                    count,
-                    props: Vec::new(),
-                });
-            }
-            "property" => {
-                let Some(element) = elements.last_mut() else {
-                    return Err(bad_header(
-                        line_no,
-                        "a property line before any element line",
-                    ));
-                };
-                let bad_type =
-                    |t: &str| bad_header(line_no, format!("unknown property type {}", quote(t)));
-                let property = if words.get(1) == Some(&"list") {
-                    if words.len() != 5 {
-                        return Err(bad_header(
-                            line_no,
-                            format!(
-                                "garbled list property line {} (expected: property list \
-                                 COUNT_TYPE ITEM_TYPE NAME)",
-                                quote(&text)
-                            ),
-                        ));
-                    }
-                    let count = Scalar::parse(words[2]).ok_or_else(|| bad_type(words[2]))?;
-                    if count.is_float() {
-                        return Err(bad_header(
-                            line_no,
-                            format!("list count type {} is not an integer type", words[2]),
-                        ));
-                    }
-                    let item = Scalar::parse(words[3]).ok_or_else(|| bad_type(words[3]))?;
-                    Property {
-                        name: words[4].to_string(),
-                        kind: Kind::List { count, item },
-                    }
-                } else {
-                    if words.len() != 3 {
-                        return Err(bad_header(
-                            line_no,
-                            format!(
-                                "garbled property line {} (expected: property TYPE NAME)",
-                                quote(&text)
-                            ),
-                        ));
-                    }
-                    let ty = Scalar::parse(words[1]).ok_or_else(|| bad_type(words[1]))?;
-                    Property {
-                        name: words[2].to_string(),
-                        kind: Kind::Scalar(ty),
-                    }
-                };
-                element.props.push(property);
-            }
-            _ => {
-                return Err(bad_header(
-                    line_no,
-                    format!(
-                        "unrecognised header line {} (a garbled keyword, or data where the \
-                         end_header line is missing)",
-                        quote(&text)
-                    ),
-                ));
-            }
+        }
+        lines.push(HeaderLine {
+            number,
+            text: String::from_utf8_lossy(trimmed).into_owned(),
+        });
+        if whole && trimmed == b"end_header" {
+            return Ok(HeaderText {
+                lines,
+                body: Some((pos, number + 1)),
+                capped: false,
+            });
         }
     }
+    if number == 0 {
+        return Err(PlyProblem::NotPly);
+    }
+    Ok(HeaderText {
+        lines,
+        body: None,
+        capped: head.len() < bytes.len(),
+    })
+}
+
+/// Numbers ply-rs would get wrong: its grammar `unwrap`s the parse of every count and version
+/// number as `u64` (a panic on a 20-digit count) and then casts them (`as usize`, `as u16`,
+/// `as u8`), which would silently turn `format ascii 256.0` into version 0.0.
+fn check_numbers(lines: &[HeaderLine]) -> Result<(), PlyProblem> {
+    let leading_digits =
+        |s: &str| -> String { s.chars().take_while(char::is_ascii_digit).collect() };
+    let fits = |digits: &str| digits.is_empty() || digits.parse::<u64>().is_ok();
+    for line in lines {
+        let words = line.words();
+        match (words.first().copied(), words.get(2)) {
+            (Some("element"), Some(count)) => {
+                let digits = leading_digits(count);
+                if !fits(&digits) || usize::try_from(digits.parse::<u64>().unwrap_or(0)).is_err() {
+                    return Err(bad_header(
+                        line.number,
+                        format!(
+                            "the count of element {} is too large: {}",
+                            words[1],
+                            quote(count)
+                        ),
+                    ));
+                }
+            }
+            (Some("format"), Some(version)) => {
+                let major = leading_digits(version);
+                let minor = version
+                    .get(major.len()..)
+                    .and_then(|r| r.strip_prefix('.'))
+                    .map(leading_digits)
+                    .unwrap_or_default();
+                let parsed = (major.parse::<u64>(), minor.parse::<u64>());
+                let digit_form = !major.is_empty() && !minor.is_empty();
+                if !fits(&major) || !fits(&minor) || (digit_form && parsed != (Ok(1), Ok(0))) {
+                    return Err(bad_header(
+                        line.number,
+                        format!("unsupported PLY version {} (expected 1.0)", quote(version)),
+                    ));
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// Parses the header: byte-level checks, then ply-rs, then the mapping to [`Header`].
+fn parse_header(bytes: &[u8]) -> Result<Header, PlyProblem> {
+    let text = split_header(bytes)?;
+    check_numbers(&text.lines)?;
+    let mut joined = String::from("ply\n");
+    for line in &text.lines {
+        joined.push_str(&line.text);
+        joined.push('\n');
+    }
+    // ply-rs's grammar unwraps number parses; check_numbers keeps those inputs away from it,
+    // and a panic that slipped through anyway is reported, not propagated.
+    let parsed = std::panic::catch_unwind(|| {
+        let mut reader = joined.as_bytes();
+        ply_rs::parser::Parser::<ply_rs::ply::DefaultElement>::new().read_header(&mut reader)
+    });
+    let header = match parsed {
+        Ok(Ok(header)) => header,
+        Ok(Err(e)) => return Err(explain_rejection(&text, &e.to_string())),
+        Err(_) => {
+            return Err(PlyProblem::BadHeader(
+                "ply-rs failed (panicked) on this header".into(),
+            ));
+        }
+    };
+    let Some((body_start, body_line)) = text.body else {
+        // ply-rs reads up to an end_header line; it cannot have accepted a header without one.
+        return Err(no_end_header(&text));
+    };
+    let elements = map_elements(&text.lines, &header)?;
+    let format = match header.encoding {
+        ply_rs::ply::Encoding::Ascii => Format::Ascii,
+        ply_rs::ply::Encoding::BinaryLittleEndian => Format::BinaryLittleEndian,
+        ply_rs::ply::Encoding::BinaryBigEndian => Format::BinaryBigEndian,
+    };
+    Ok(Header {
+        format,
+        elements,
+        body_start,
+        body_line,
+    })
+}
+
+fn no_end_header(text: &HeaderText) -> PlyProblem {
+    PlyProblem::BadHeader(if text.capped {
+        format!(
+            "no end_header line in the first {} MiB (the header has no end_header line, or \
+             is far too long)",
+            MAX_HEADER_BYTES >> 20
+        )
+    } else {
+        "the header has no end_header line".into()
+    })
+}
+
+/// The [`PlyProblem`] for a header ply-rs rejected with `message`: ply-rs's reason, and the
+/// offending line with a more specific reason where one can be given.
+fn explain_rejection(text: &HeaderText, message: &str) -> PlyProblem {
+    let first = message.lines().next().unwrap_or("").trim();
+    // ply-rs reports "Line N: reason", N counting the lines it was given (ours, from "ply").
+    let (line_index, reason) = match first
+        .strip_prefix("Line ")
+        .and_then(|r| r.split_once(": "))
+        .and_then(|(n, reason)| Some((n.parse::<usize>().ok()?, reason)))
+    {
+        Some((n, reason)) => (Some(n), reason),
+        None => (None, first),
+    };
+    // "Property 'PropertyDef { .. }' found ...": leave out the Debug dump.
+    let reason = match reason.split_once(" '") {
+        Some((head, rest)) if rest.starts_with("PropertyDef") => {
+            let tail = rest.rsplit_once("' ").map_or("", |(_, t)| t);
+            format!("{head} {tail}")
+        }
+        _ => reason.to_string(),
+    };
+    let mut summary: String = reason.chars().take(80).collect();
+    if summary.len() < reason.len() {
+        summary.push_str("...");
+    }
+    if let Some(column) = message
+        .split_once("column: ")
+        .and_then(|(_, r)| r.split(|c: char| !c.is_ascii_digit()).next())
+        .filter(|c| !c.is_empty())
+    {
+        summary.push_str(&format!(" (column {column})"));
+    }
+    let Some(index) = line_index else {
+        if message.contains("No format line") {
+            return PlyProblem::BadHeader(format!(
+                "the header has no format line [ply-rs: {summary}]"
+            ));
+        }
+        return PlyProblem::BadHeader(format!("[ply-rs: {summary}]"));
+    };
+    match index.checked_sub(2).map(|i| (i, text.lines.get(i))) {
+        Some((i, Some(line))) => bad_header(
+            line.number,
+            format!(
+                "{} [ply-rs: {summary}]",
+                describe_bad_line(&text.lines[..i], line)
+            ),
+        ),
+        // ply-rs ran out of lines: there is no end_header line.
+        Some((_, None)) => no_end_header(text),
+        None => PlyProblem::BadHeader(format!("[ply-rs: {summary}]")),
+    }
+}
+
+/// Why ply-rs rejected `line` (with `before` the header lines above it), in words: a more
+/// specific reason than ply-rs's "Couldn't parse line". Only used for error messages: the
+/// header structures come from ply-rs.
+fn describe_bad_line(before: &[HeaderLine], line: &HeaderLine) -> String {
+    let words = line.words();
+    let text = &line.text;
+    let unknown_type = |t: &str| {
+        (Scalar::parse(t).is_none()).then(|| format!("unknown property type {}", quote(t)))
+    };
+    let specific = match words.first().copied().unwrap_or("") {
+        "ply" => Some("a second \"ply\" line".to_string()),
+        "end_header" => Some(format!("garbled line {}", quote(text))),
+        "comment" | "obj_info" => Some(format!(
+            "garbled {} line {} (a carriage return inside it?)",
+            words[0],
+            quote(text)
+        )),
+        "format" => {
+            if words.len() != 3 {
+                Some(format!("garbled format line {}", quote(text)))
+            } else if !matches!(
+                words[1],
+                "ascii" | "binary_little_endian" | "binary_big_endian"
+            ) {
+                Some(format!(
+                    "unknown format {} (expected ascii, binary_little_endian or \
+                     binary_big_endian)",
+                    quote(words[1])
+                ))
+            } else if words[2] != "1.0" {
+                Some(format!(
+                    "unsupported PLY version {} (expected 1.0)",
+                    quote(words[2])
+                ))
+            } else {
+                Some("a second format line that contradicts the first".to_string())
+            }
+        }
+        "element" => {
+            if words.len() != 3 {
+                Some(format!(
+                    "garbled element line {} (expected: element NAME COUNT)",
+                    quote(text)
+                ))
+            } else if words[2].parse::<u64>().is_err() {
+                Some(format!(
+                    "the count of element {} is not a whole number: {}",
+                    words[1],
+                    quote(words[2])
+                ))
+            } else {
+                Some(format!(
+                    "element name {} is not an identifier (a letter or _, then letters, \
+                     digits, _ or -)",
+                    quote(words[1])
+                ))
+            }
+        }
+        "property" => {
+            if !before.iter().any(|l| l.keyword() == "element") {
+                Some("a property line before any element line".to_string())
+            } else if words.get(1) == Some(&"list") {
+                if words.len() != 5 {
+                    Some(format!(
+                        "garbled list property line {} (expected: property list COUNT_TYPE \
+                         ITEM_TYPE NAME)",
+                        quote(text)
+                    ))
+                } else {
+                    unknown_type(words[2]).or_else(|| unknown_type(words[3]))
+                }
+            } else if words.len() != 3 {
+                Some(format!(
+                    "garbled property line {} (expected: property TYPE NAME)",
+                    quote(text)
+                ))
+            } else {
+                unknown_type(words[1])
+            }
+        }
+        _ => Some(format!(
+            "unrecognised header line {} (a garbled keyword, or data where the end_header \
+             line is missing)",
+            quote(text)
+        )),
+    };
+    specific.unwrap_or_else(|| format!("ply-rs cannot parse the header line {}", quote(text)))
+}
+
+/// Maps ply-rs's element definitions to [`Element`]s, checking what ply-rs does not: that no
+/// two elements, and no two properties of an element, share a name (ply-rs keys them by name,
+/// so a repeated name would silently replace the earlier declaration and shift the record
+/// layout) and that list counts have an integer type.
+fn map_elements(
+    lines: &[HeaderLine],
+    header: &ply_rs::ply::Header,
+) -> Result<Vec<Element>, PlyProblem> {
+    use ply_rs::ply::{PropertyType, ScalarType};
+    // The element and property lines, in order: ply-rs accepted the header, so each is one
+    // declaration.
+    let declarations: Vec<&HeaderLine> = lines
+        .iter()
+        .filter(|l| matches!(l.keyword(), "element" | "property"))
+        .collect();
+    let declared = header.elements.len()
+        + header
+            .elements
+            .values()
+            .map(|e| e.properties.len())
+            .sum::<usize>();
+    if declared != declarations.len() {
+        return Err(duplicate_name(&declarations));
+    }
+    let scalar = |t: &ScalarType| match t {
+        ScalarType::Char => Scalar::I8,
+        ScalarType::UChar => Scalar::U8,
+        ScalarType::Short => Scalar::I16,
+        ScalarType::UShort => Scalar::U16,
+        ScalarType::Int => Scalar::I32,
+        ScalarType::UInt => Scalar::U32,
+        ScalarType::Float => Scalar::F32,
+        ScalarType::Double => Scalar::F64,
+    };
+    let mut lines = declarations.iter();
+    let mut elements = Vec::with_capacity(header.elements.len());
+    for def in header.elements.values() {
+        lines.next();
+        let mut props = Vec::with_capacity(def.properties.len());
+        for prop in def.properties.values() {
+            let line = lines.next().map_or(0, |l| l.number);
+            let kind = match &prop.data_type {
+                PropertyType::Scalar(t) => Kind::Scalar(scalar(t)),
+                PropertyType::List(count, item) => {
+                    let count = scalar(count);
+                    if count.is_float() {
+                        return Err(bad_header(
+                            line,
+                            format!(
+                                "the count type of list {} is not an integer type",
+                                prop.name
+                            ),
+                        ));
+                    }
+                    Kind::List {
+                        count,
+                        item: scalar(item),
+                    }
+                }
+            };
+            props.push(Property {
+                name: prop.name.clone(),
+                kind,
+            });
+        }
+        elements.push(Element {
+            name: def.name.clone(),
+            count: def.count as u64,
+            props,
+        });
+    }
+    Ok(elements)
+}
+
+/// The problem for a header that repeats an element name, or a property name in an element.
+fn duplicate_name(declarations: &[&HeaderLine]) -> PlyProblem {
+    let mut elements: Vec<&str> = Vec::new();
+    let mut properties: Vec<&str> = Vec::new();
+    for line in declarations {
+        let words = line.words();
+        let name = words.last().copied().unwrap_or("");
+        if words[0] == "element" {
+            let name = words.get(1).copied().unwrap_or("");
+            if elements.contains(&name) {
+                return bad_header(
+                    line.number,
+                    format!(
+                        "a second element named {} (element names must be unique)",
+                        quote(name)
+                    ),
+                );
+            }
+            elements.push(name);
+            properties.clear();
+        } else {
+            if properties.contains(&name) {
+                return bad_header(
+                    line.number,
+                    format!(
+                        "a second property named {} in element {} (property names must be \
+                         unique)",
+                        quote(name),
+                        elements.last().copied().unwrap_or("")
+                    ),
+                );
+            }
+            properties.push(name);
+        }
+    }
+    PlyProblem::BadHeader("ply-rs merged header declarations that share a name".into())
 }
 
 // ------------------------------------------------------------------------------------------
@@ -1237,15 +1552,19 @@ fn validate(cloud: &PointCloud, options: &WriteOptions) -> Result<(), PlyProblem
         if values.len() != n {
             return Err(mismatch(&format!("\"{name}\" labels"), values.len()));
         }
-        if name.is_empty()
+        // A PLY identifier as ply-rs reads it: a letter or _, then letters, digits, _ or -.
+        if !name
+            .chars()
+            .next()
+            .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
             || !name
                 .chars()
                 .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
             || RESERVED.contains(&name.as_str())
         {
             return Err(PlyProblem::Inconsistent(format!(
-                "\"{name}\" cannot name a label property (use letters, digits, _ or -, and not \
-                 a coordinate, normal or colour name)"
+                "\"{name}\" cannot name a label property (use a letter or _, then letters, \
+                 digits, _ or -, and not a coordinate, normal or colour name)"
             )));
         }
         if let Some(bad) = values.iter().find(|&&v| v > i32::MAX as u32) {
@@ -1255,6 +1574,53 @@ fn validate(cloud: &PointCloud, options: &WriteOptions) -> Result<(), PlyProblem
         }
     }
     Ok(())
+}
+
+/// The header of [`write_ply`]'s files, written by ply-rs: `binary_little_endian 1.0`, one
+/// comment, and one `vertex` element of `count` records with the properties asked for.
+fn header_bytes(
+    count: usize,
+    normals: bool,
+    colors: bool,
+    label: Option<&str>,
+) -> Result<Vec<u8>, PlyProblem> {
+    use ply_rs::ply::{
+        Addable, ElementDef, Encoding, Header, PropertyDef, PropertyType, ScalarType,
+    };
+    let mut vertex = ElementDef::new("vertex".to_string());
+    vertex.count = count;
+    let mut add = |name: &str, ty: ScalarType| {
+        vertex
+            .properties
+            .add(PropertyDef::new(name.to_string(), PropertyType::Scalar(ty)));
+    };
+    for name in ["x", "y", "z"] {
+        add(name, ScalarType::Float);
+    }
+    if normals {
+        for name in ["nx", "ny", "nz"] {
+            add(name, ScalarType::Float);
+        }
+    }
+    if colors {
+        for name in ["red", "green", "blue"] {
+            add(name, ScalarType::UChar);
+        }
+    }
+    if let Some(name) = label {
+        add(name, ScalarType::Int);
+    }
+    let mut header = Header::new();
+    header.encoding = Encoding::BinaryLittleEndian;
+    header.comments.push("written by pygmalion".to_string());
+    header.elements.add(vertex);
+    // Into memory first: ply-rs writes with `Write::write`, not `write_all`, which is only
+    // complete for writers such as `Vec` (the caller's writer gets one `write_all`).
+    let mut bytes = Vec::with_capacity(256);
+    ply_rs::writer::Writer::<ply_rs::ply::DefaultElement>::new()
+        .write_header(&mut bytes, &header)
+        .map_err(PlyProblem::Write)?;
+    Ok(bytes)
 }
 
 /// Writes `cloud` as a binary little-endian PLY to `writer` (see [`write_ply`]). The writer
@@ -1269,22 +1635,13 @@ pub fn write_ply_to(
     let colors = cloud.colors.as_deref().filter(|_| options.colors);
     let labels = options.labels.as_ref();
 
-    let mut header =
-        String::from("ply\nformat binary_little_endian 1.0\ncomment written by pygmalion\n");
-    header.push_str(&format!("element vertex {}\n", cloud.positions.len()));
-    header.push_str("property float x\nproperty float y\nproperty float z\n");
-    if normals.is_some() {
-        header.push_str("property float nx\nproperty float ny\nproperty float nz\n");
-    }
-    if colors.is_some() {
-        header.push_str("property uchar red\nproperty uchar green\nproperty uchar blue\n");
-    }
-    if let Some((name, _)) = labels {
-        header.push_str(&format!("property int {name}\n"));
-    }
-    header.push_str("end_header\n");
     writer
-        .write_all(header.as_bytes())
+        .write_all(&header_bytes(
+            cloud.positions.len(),
+            normals.is_some(),
+            colors.is_some(),
+            labels.map(|(name, _)| name.as_str()),
+        )?)
         .map_err(PlyProblem::Write)?;
 
     let record = 12

@@ -100,6 +100,47 @@ pub struct Projection {
     pub on_surface: bool,
 }
 
+/// Derivatives of a projection's [`Projection::residual`] with respect to the bone's
+/// geometry (see [`Projection::gradient`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BoneGradient {
+    /// `∂ residual / ∂ c1`.
+    pub dc1: Vec3,
+    /// `∂ residual / ∂ c2`.
+    pub dc2: Vec3,
+    /// `∂ residual / ∂ r1`.
+    pub dr1: f32,
+    /// `∂ residual / ∂ r2`.
+    pub dr2: f32,
+}
+
+impl Projection {
+    /// Derivatives of [`Projection::residual`] with respect to `c1`, `c2`, `r1`, `r2`, the
+    /// point `p` and its projection case being fixed.
+    ///
+    /// The bone is the envelope of the spheres `(c(τ), r(τ))` with `c(τ) = (1 − τ) c1 + τ c2`
+    /// and `r(τ) = (1 − τ) r1 + τ r2`, and the residual is stationary in `τ` at the projection
+    /// (that is how `τ_{±α}` is defined), so by the envelope theorem only the explicit
+    /// dependence remains: for a consistent projection `residual = (p − c(τ))·n − r(τ)`, for a
+    /// flipped one `residual = −(p − c(τ))·n + r(τ)` (`n` the surface normal at `p̃`). Hence,
+    /// with weights `w1 = 1 − τ`, `w2 = τ` and `s = +1` (consistent) or `−1` (flipped):
+    /// `∂/∂c_i = −s w_i n` and `∂/∂r_i = −s w_i`. These reproduce the papers' one- and
+    /// two-bone derivatives (eq. 2.9–2.10, 2.14–2.15) by the chain rule through any
+    /// parameterisation of `c1, c2, r1, r2`; they are checked against finite differences.
+    #[inline]
+    pub fn gradient(&self) -> BoneGradient {
+        let tau = self.tau.clamp(0.0, 1.0);
+        let s = if self.flipped { -1.0 } else { 1.0 };
+        let (w1, w2) = (1.0 - tau, tau);
+        BoneGradient {
+            dc1: -s * w1 * self.normal,
+            dc2: -s * w2 * self.normal,
+            dr1: -s * w1,
+            dr2: -s * w2,
+        }
+    }
+}
+
 /// A bone with its per-bone constants precomputed (axis, length, cone angle), for projecting
 /// many points.
 #[derive(Clone, Copy, Debug, PartialEq)]

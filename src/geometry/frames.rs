@@ -2,9 +2,30 @@
 
 use crate::math::{Quat, Vec3};
 
-/// The rotation taking the unit vector `from` to the unit vector `to` by the shortest arc.
+/// The rotation taking the direction `from` to the direction `to` by the shortest arc.
+///
+/// Unlike `Quat::from_rotation_arc`, which returns the identity for angles below about
+/// `7e-4` rad in `f32`, this keeps small rotations exact (the angle comes from the cross
+/// product through `atan2`), which Levenberg–Marquardt steps and finite differences need.
+pub fn rotation_arc(from: Vec3, to: Vec3) -> Quat {
+    let a = from.normalize_or(Vec3::X);
+    let b = to.normalize_or(Vec3::X);
+    let axis = a.cross(b);
+    let s = axis.length();
+    let c = a.dot(b);
+    if s < 1e-20 {
+        if c > 0.0 {
+            return Quat::IDENTITY;
+        }
+        // Opposite directions: half a turn about any orthogonal axis.
+        return Quat::from_axis_angle(a.any_orthonormal_vector(), std::f32::consts::PI);
+    }
+    Quat::from_axis_angle(axis / s, s.atan2(c))
+}
+
+/// Alias of [`rotation_arc`].
 pub fn rotation_between(from: Vec3, to: Vec3) -> Quat {
-    Quat::from_rotation_arc(from.normalize_or(Vec3::X), to.normalize_or(Vec3::X))
+    rotation_arc(from, to)
 }
 
 /// A right-handed orthonormal frame whose X axis is `axis` and whose Y axis is the part of

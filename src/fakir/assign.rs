@@ -1,0 +1,212 @@
+//! The point-to-bone assignment `P_k` (thesis §2.2.2, paper 001 §3.2).
+//!
+//! Each point goes to the bone with the smallest normal-constrained distance `d_k = |p − p̃_k|`,
+//! **preferring a cone part over a cap** when the distances are similar (paper 001: "if `p`
+//! projects on the spherical part of the closest bone and if it also projects on the conical
+//! part of another bone with a similar distance, we assign it to this second bone").
+//!
+//! **Choice:** "similar" means `d_cone ≤ (1 + cone_slack) · d_best + cone_abs`, with
+//! `cone_slack = 0.2` and `cone_abs = 0.002 ×` the statue's height by default.
+//!
+//! The assignment keeps the distance of every point to every bone (one column of `f32` per
+//! bone, structure of arrays) and the part each projection falls on, so after a parameter
+//! change only the columns of the bones that moved are recomputed, then the argmin is redone
+//! ([`Assignment::refresh`]). Work is split by point ranges so the registration can bound each
+//! work unit; every loop over points is a rayon loop over fixed-size chunks and writes only its
+//! own slots, so results do not depend on the thread count.
+
+use crate::geometry::{Part, PreparedBone};
+use crate::math::Vec3;
+use rayon::prelude::*;
+
+/// Points per parallel chunk.
+pub const CHUNK: usize = 2048;
+
+/// Assignment parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AssignParams {
+    /// Relative slack of the cone preference.
+    pub cone_slack: f32,
+    /// Absolute slack of the cone preference (length units).
+    pub cone_abs: f32,
+}
+
+/// The assignment of a set of points (see the module docs).
+#[derive(Clone, Debug)]
+pub struct Assignment {
+    /// Positions of the assigned points.
+    pub positions: Vec<Vec3>,
+    /// Their normals (zero vectors when unknown).
+    pub normals: Vec<Vec3>,
+    /// Indices of these points in the full cloud.
+    pub source: Vec<u32>,
+    n_bones: usize,
+    /// `dist[b * n + i]`: constrained distance of point `i` to bone `b`.
+    dist: Vec<f32>,
+    /// `cone[b * n + i]`: whether that projection lies on the cone part.
+    cone: Vec<bool>,
+    /// Bone of each point.
+    pub label: Vec<u32>,
+    /// Bones that may receive points (others are ignored by the argmin).
+    pub enabled: Vec<bool>,
+    pub params: AssignParams,
+}
+
+impl Assignment {
+    /// An assignment of the given points to `n_bones` bones; distances start at infinity and
+    /// labels at 0 until the first [`Assignment::refresh`].
+    pub fn new(
+        positions: Vec<Vec3>,
+        normals: Vec<Vec3>,
+        source: Vec<u32>,
+        n_bones: usize,
+        params: AssignParams,
+    ) -> Self {
+        let n = positions.len();
+        Assignment {
+            positions,
+            normals,
+            source,
+            n_bones,
+            dist: vec![f32::INFINITY; n * n_bones],
+            cone: vec![false; n * n_bones],
+            label: vec![0; n],
+            enabled: vec![true; n_bones],
+            params,
+        }
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// True when there is no point.
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+
+    /// Number of bones.
+    pub fn n_bones(&self) -> usize {
+        self.n_bones
+    }
+
+    /// Recomputes the distance columns of `bones_to_update` for the points in `range`.
+    pub fn update_columns(
+        &mut self,
+        bones: &[PreparedBone],
+        bones_to_update: &[usize],
+        range: std::ops::Range<usize>,
+    ) {
+        let n = self.len();
+        for &b in bones_to_update {
+            let pb = &bones[b];
+            let dist = &mut self.dist[b * n + range.start..b * n + range.end];
+            let cone = &mut self.cone[b * n + range.start..b * n + range.end];
+            let pos = &self.positions[range.clone()];
+            let nrm = &self.normals[range.clone()];
+            dist.par_chunks_mut(CHUNK)
+                .zip(cone.par_chunks_mut(CHUNK))
+                .zip(pos.par_chunks(CHUNK).zip(nrm.par_chunks(CHUNK)))
+                .for_each(|((d, c), (p, nn))| {
+                    for k in 0..d.len() {
+                        let proj = pb.project_constrained(p[k], nn[k]);
+                        d[k] = proj.distance;
+                        c[k] = proj.part == Part::Cone && proj.on_surface;
+                    }
+                });
+        }
+    }
+
+    /// Redoes the argmin (with the cone preference) for the points in `range`.
+    pub fn relabel(&mut self, range: std::ops::Range<usize>) {
+        let n = self.len();
+        let nb = self.n_bones;
+        let dist = &self.dist;
+        let cone = &self.cone;
+        let enabled = &self.enabled;
+        let AssignParams {
+            cone_slack,
+            cone_abs,
+        } = self.params;
+        let start = range.start;
+        self.label[range]
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(ci, labels)| {
+                for (k, l) in labels.iter_mut().enumerate() {
+                    let i = start + ci * CHUNK + k;
+                    let mut best = u32::MAX;
+                    let mut best_d = f32::INFINITY;
+                    for b in 0..nb {
+                        let d = dist[b * n + i];
+                        if enabled[b] && d < best_d {
+                            best_d = d;
+                            best = b as u32;
+                        }
+                    }
+                    if best != u32::MAX && !cone[best as usize * n + i] {
+                        // Prefer a cone part with a similar distance.
+                        let limit = (1.0 + cone_slack) * best_d + cone_abs;
+                        let mut alt = u32::MAX;
+                        let mut alt_d = f32::INFINITY;
+                        for b in 0..nb {
+                            let d = dist[b * n + i];
+                            if enabled[b] && cone[b * n + i] && d <= limit && d < alt_d {
+                                alt_d = d;
+                                alt = b as u32;
+                            }
+                        }
+                        if alt != u32::MAX {
+                            best = alt;
+                        }
+                    }
+                    *l = if best == u32::MAX { 0 } else { best };
+                }
+            });
+    }
+
+    /// Recomputes the columns of `moved` bones for all points and relabels them.
+    pub fn refresh(&mut self, bones: &[PreparedBone], moved: &[usize]) {
+        let n = self.len();
+        self.update_columns(bones, moved, 0..n);
+        self.relabel(0..n);
+    }
+
+    /// Distance of point `i` to bone `b` (as last computed).
+    pub fn distance(&self, b: usize, i: usize) -> f32 {
+        self.dist[b * self.len() + i]
+    }
+
+    /// Distance of point `i` to its assigned bone.
+    pub fn own_distance(&self, i: usize) -> f32 {
+        self.dist[self.label[i] as usize * self.len() + i]
+    }
+
+    /// Indices of the points assigned to each bone, in increasing order.
+    pub fn members(&self) -> Vec<Vec<u32>> {
+        let mut m = vec![Vec::new(); self.n_bones];
+        for (i, &l) in self.label.iter().enumerate() {
+            m[l as usize].push(i as u32);
+        }
+        m
+    }
+
+    /// Mean distance of the points to their bones (thesis eq. 2.16), summed in a fixed order.
+    pub fn mean_distance(&self) -> f64 {
+        if self.is_empty() {
+            return 0.0;
+        }
+        let n = self.len();
+        let partial: Vec<f64> = (0..n)
+            .into_par_iter()
+            .chunks(CHUNK)
+            .map(|idx| {
+                idx.iter()
+                    .map(|&i| self.own_distance(i) as f64)
+                    .sum::<f64>()
+            })
+            .collect();
+        partial.iter().sum::<f64>() / n as f64
+    }
+}

@@ -1,0 +1,573 @@
+//! Levenberg–Marquardt over small groups of skeleton parameters (thesis §2.3, eq. 2.7–2.8 and
+//! 2.12–2.13; paper 001 appendices B–C).
+//!
+//! One LM iteration for a parameter group `θ` (1 to 7 parameters) minimises the energy of the
+//! points assigned to a set of bones (the one-bone energy eq. 2.3/2.6, the two-bone energy
+//! eq. 2.5/2.11, or the root-block energy) with the assignment held fixed:
+//! `δθ = −[JᵀJ + λ diag(JᵀJ)]⁻¹ Jᵀ g(θ)`, the damping `λ` starting at 0.01 and divided by 10
+//! after an accepted step, multiplied by 10 after a rejected one.
+//!
+//! **Derivatives.** Each residual's derivative is the chain rule of two factors:
+//! * per point, analytic: the derivative of the residual with respect to its bone's
+//!   `c1, c2, r1, r2` ([`crate::geometry::Projection::gradient`], envelope theorem);
+//! * per parameter, the derivative of the bones' `c1, c2, r1, r2` with respect to the
+//!   parameter, by central differences of the skeleton's forward kinematics (a handful of
+//!   bones, not the points; step `1e-4` rad or `1e-4 ×` the statue scale).
+//! This gives the papers' derivatives (eq. 2.9–2.10 for the two angles, 2.14–2.15 for the two
+//! lengths) for every parameterisation at once, including the block and follower
+//! constraints; tests compare the resulting Jacobian with finite differences of the energy.
+//!
+//! **Choice:** loose proportion bounds (§2.4.1, §2.6.1) are enforced by clamping after each
+//! step ([`Limits`]): lengths stay within `[0.2, 3.5] ×` the template's (scaled) length and the
+//! ratio of consecutive chain bones within `4 ×` of the template's ratio either way, radii
+//! within `[0.03, 3] ×` the template's, and `|r2 − r1| ≤ 0.9 l` so no sphere swallows its
+//! neighbour. The energy is evaluated after clamping, so a clamped step is only accepted when
+//! it still lowers the energy.
+
+use super::assign::{Assignment, CHUNK};
+use super::world::{End, RadiusClasses, WorldSkeleton};
+use crate::anatomy::template::BoneKind;
+use crate::geometry::{Bone, PreparedBone};
+use crate::math::{Quat, Vec3};
+use rayon::prelude::*;
+
+/// Largest parameter group.
+pub const MAX_PARAMS: usize = 7;
+
+/// One scalar parameter of the skeleton, applied as an increment to the current state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Param {
+    /// Rotation of `bone` about the world `axis` through its first joint; descendants follow.
+    Swing { bone: usize, axis: Vec3 },
+    /// Length of `bone`; descendants translate.
+    Length { bone: usize },
+    /// A radius (and every radius shared with it).
+    Radius { bone: usize, end: End },
+    /// Rotation of the joint between `a` and its child `b` about the axis through the outer
+    /// joints, which stay fixed (thesis fig. 2.5).
+    PairRotate { a: usize, b: usize },
+    /// Length of `a` (`first`) or of `b`, the outer joints fixed (eq. 2.11–2.15).
+    PairLength { a: usize, b: usize, first: bool },
+    /// Translation of the root along a world axis; the whole skeleton follows.
+    RootMove { axis: Vec3 },
+    /// Rotation of the whole skeleton about the root joint.
+    RootRotate { axis: Vec3 },
+    /// Logarithm of the root block's scale.
+    BlockScale,
+    /// Translation of the first joint of a bone leaving the root (a free chain extremity), its
+    /// second joint fixed.
+    AnchorMove { bone: usize, axis: Vec3 },
+}
+
+/// Moves the joint at the end of `a` to `target`, the first joint of `a` and the second joint
+/// of `b` (a's child, possibly through a follower) staying where they are.
+fn move_pair_joint(w: &mut WorldSkeleton, a: usize, b: usize, target: Vec3) {
+    let posed = w.pose();
+    let c_k = posed.bones[a].c1;
+    let c_k2 = posed.bones[b].c2;
+    w.aim(a, c_k, target);
+    w.enforce();
+    let c1_b = w.pose().bones[b].c1;
+    w.aim(b, c1_b, c_k2);
+    w.enforce();
+}
+
+/// Applies `value` of parameter `p` to `w` (an increment from the current state).
+pub fn apply(w: &mut WorldSkeleton, classes: &RadiusClasses, p: &Param, value: f32) {
+    match *p {
+        Param::Swing { bone, axis } => {
+            w.rotate_subtree(bone, Quat::from_axis_angle(axis, value));
+            w.enforce();
+        }
+        Param::Length { bone } => {
+            w.lengths[bone] = (w.lengths[bone] + value).max(1e-6);
+            w.enforce();
+        }
+        Param::Radius { bone, end } => {
+            let r = (w.radius(bone, end) + value).max(1e-6);
+            w.set_radius(classes, bone, end, r);
+        }
+        Param::PairRotate { a, b } => {
+            let posed = w.pose();
+            let (c_k, j, c_k2) = (posed.bones[a].c1, posed.bones[a].c2, posed.bones[b].c2);
+            let axis = (c_k2 - c_k).normalize_or(Vec3::Z);
+            let target = c_k + Quat::from_axis_angle(axis, value) * (j - c_k);
+            move_pair_joint(w, a, b, target);
+        }
+        Param::PairLength { a, b, first } => {
+            let posed = w.pose();
+            let (c_k, j, c1_b, c_k2) = (
+                posed.bones[a].c1,
+                posed.bones[a].c2,
+                posed.bones[b].c1,
+                posed.bones[b].c2,
+            );
+            let dir = if first {
+                (j - c_k).normalize_or(Vec3::X)
+            } else {
+                (c1_b - c_k2).normalize_or(Vec3::X)
+            };
+            move_pair_joint(w, a, b, j + value * dir);
+        }
+        Param::RootMove { axis } => w.root_position += value * axis,
+        Param::RootRotate { axis } => w.rotate_all(Quat::from_axis_angle(axis, value)),
+        Param::BlockScale => w.scale_block(value.exp()),
+        Param::AnchorMove { bone, axis } => {
+            let c2 = w.pose().bones[bone].c2;
+            w.root_position += value * axis;
+            let root = w.root_position;
+            w.aim(bone, root, c2);
+            w.enforce();
+        }
+    }
+}
+
+/// Finite-difference step of a parameter (see the module docs).
+fn fd_step(p: &Param, scale: f32) -> f32 {
+    match p {
+        Param::Swing { .. }
+        | Param::PairRotate { .. }
+        | Param::RootRotate { .. }
+        | Param::BlockScale => 1e-3,
+        _ => 1e-3 * scale,
+    }
+}
+
+/// Loose bounds on lengths and radii (see the module docs).
+#[derive(Clone, Debug)]
+pub struct Limits {
+    pub min_len: Vec<f32>,
+    pub max_len: Vec<f32>,
+    pub min_r: Vec<[f32; 2]>,
+    pub max_r: Vec<[f32; 2]>,
+    /// Template length ratio of each bone to its chain predecessor (None for chain heads).
+    pub prev_ratio: Vec<Option<(usize, f32)>>,
+}
+
+impl Limits {
+    /// Loose bounds for a template scaled by `scale` (template units → statue units).
+    pub fn new(w: &WorldSkeleton, scale: f32) -> Self {
+        Self::with_length_range(w, scale, 0.2, 3.5)
+    }
+
+    /// Bounds with lengths within `[lo, hi] ×` the scaled template lengths.
+    pub fn with_length_range(w: &WorldSkeleton, scale: f32, lo: f32, hi: f32) -> Self {
+        let t = &w.template;
+        let n = t.bones.len();
+        let mut l = Limits {
+            min_len: vec![0.0; n],
+            max_len: vec![f32::INFINITY; n],
+            min_r: vec![[0.0; 2]; n],
+            max_r: vec![[f32::INFINITY; 2]; n],
+            prev_ratio: vec![None; n],
+        };
+        for (i, def) in t.bones.iter().enumerate() {
+            let rest = w.rest_length(i) * scale;
+            l.min_len[i] = lo * rest;
+            l.max_len[i] = hi * rest;
+            l.min_r[i] = [0.03 * def.r1 * scale, 0.03 * def.r2 * scale];
+            l.max_r[i] = [3.0 * def.r1 * scale, 3.0 * def.r2 * scale];
+            if let Some((c, pos)) = def.chain {
+                if pos > 0 {
+                    let prev = t.chains[c].bones[pos - 1];
+                    l.prev_ratio[i] = Some((prev, w.rest_length(i) / w.rest_length(prev)));
+                }
+            }
+        }
+        l
+    }
+
+    /// Clamps the lengths and radii of `bones` (and what shares their radii).
+    pub fn clamp(&self, w: &mut WorldSkeleton, classes: &RadiusClasses, bones: &[usize]) {
+        let t = w.template.clone();
+        for &b in bones {
+            if t.bones[b].kind != BoneKind::Free {
+                continue;
+            }
+            let mut len = w.lengths[b].clamp(self.min_len[b], self.max_len[b]);
+            if let Some((prev, ratio)) = self.prev_ratio[b] {
+                let lp = w.lengths[prev];
+                len = len.clamp(0.25 * ratio * lp, 4.0 * ratio * lp);
+            }
+            w.lengths[b] = len;
+            for (k, end) in [(0, End::First), (1, End::Second)] {
+                let r = w.radius(b, end);
+                let c = r.clamp(self.min_r[b][k], self.max_r[b][k]);
+                if c != r {
+                    w.set_radius(classes, b, end, c);
+                }
+            }
+            let (r1, r2) = (w.r1[b], w.r2[b]);
+            let max_dr = 0.9 * w.lengths[b];
+            if (r2 - r1).abs() > max_dr {
+                // Shrink the larger radius.
+                if r2 > r1 {
+                    w.set_radius(classes, b, End::Second, r1 + max_dr);
+                } else {
+                    w.set_radius(classes, b, End::First, r2 + max_dr);
+                }
+            }
+        }
+        w.enforce();
+    }
+}
+
+/// The data an LM iteration reads: the assignment and the members of each energy bone.
+pub struct EnergyTerms<'a> {
+    pub assignment: &'a Assignment,
+    /// Point indices (into the assignment) of each bone.
+    pub members: &'a [Vec<u32>],
+    /// Bones whose points make up the energy.
+    pub bones: &'a [usize],
+    /// Optional free-cap term of an extremity bone.
+    pub cap: Option<CapTerm<'a>>,
+}
+
+/// The free-cap term of a chain extremity (thesis §2.5.1: "modify the one-bone energy of the
+/// first and last bones by adding a term corresponding to the distance of the free caps to
+/// the data points"). Without it, nothing stops an extremity from growing into a long thin
+/// cone: its lateral surface still fits the points while its cap floats away from the data.
+///
+/// **Choice:** 13 samples on the free hemisphere (its pole and two rings at 30° and 60°), each
+/// contributing `weight · max(0, |s − q| − slack)` with `q` the nearest data point (k-d tree,
+/// re-queried at each evaluation) and `slack` the data's typical point spacing, so a cap that
+/// lies on the data costs nothing (no bias towards dense spots) and a floating one is pulled
+/// back; `weight² · 13` equals the number of points the cap should carry, i.e. the bone's
+/// points times the cap's share of the bone's area.
+pub struct CapTerm<'a> {
+    pub bone: usize,
+    pub end: End,
+    pub tree: &'a kiddo::ImmutableKdTree<f32, 3>,
+    pub positions: &'a [Vec3],
+    pub weight: f64,
+    /// Distance under which a sample counts as lying on the data.
+    pub slack: f32,
+}
+
+/// Directions of the cap samples in the bone frame (free end at `+X`).
+fn cap_dirs() -> [Vec3; 13] {
+    let mut d = [Vec3::X; 13];
+    let mut k = 1;
+    for beta in [30f32, 60.0] {
+        let (sb, cb) = beta.to_radians().sin_cos();
+        for i in 0..6 {
+            let phi = i as f32 * std::f32::consts::TAU / 6.0 + if beta > 45.0 { 0.5 } else { 0.0 };
+            d[k] = Vec3::new(cb, sb * phi.cos(), sb * phi.sin());
+            k += 1;
+        }
+    }
+    d
+}
+
+impl CapTerm<'_> {
+    /// World positions of the cap samples.
+    pub fn samples(&self, w: &WorldSkeleton) -> [Vec3; 13] {
+        let bone = w.bones()[self.bone];
+        let f = w.frames[self.bone];
+        let (c, r, sign) = match self.end {
+            End::Second => (bone.c2, bone.r2, 1.0),
+            End::First => (bone.c1, bone.r1, -1.0),
+        };
+        cap_dirs().map(|m| c + r * (f * (sign * m)))
+    }
+
+    /// Nearest data point of a sample.
+    fn nearest(&self, s: Vec3) -> Vec3 {
+        let nn = self
+            .tree
+            .query(&s.to_array())
+            .nearest_one::<kiddo::SquaredEuclidean<f32>>()
+            .execute();
+        self.positions[nn.item as usize]
+    }
+
+    /// Weighted residuals and their unit directions `(s − q)/|s − q|`.
+    fn residuals(&self, w: &WorldSkeleton) -> [(f64, Vec3); 13] {
+        self.samples(w).map(|s| {
+            let d = s - self.nearest(s);
+            let l = d.length();
+            if l <= self.slack {
+                (0.0, Vec3::ZERO)
+            } else {
+                (self.weight * (l - self.slack) as f64, d / l)
+            }
+        })
+    }
+
+    /// Energy of the term.
+    pub fn energy(&self, w: &WorldSkeleton) -> f64 {
+        self.residuals(w).iter().map(|(r, _)| r * r).sum()
+    }
+}
+
+impl EnergyTerms<'_> {
+    /// Number of points in the energy.
+    pub fn count(&self) -> usize {
+        self.bones.iter().map(|&b| self.members[b].len()).sum()
+    }
+
+    /// Energy (sum of squared residuals) for the given world bones, in a fixed order.
+    pub fn energy(&self, bones: &[Bone]) -> f64 {
+        let mut total = 0.0f64;
+        for &b in self.bones {
+            let pb = bones[b].prepare();
+            let idx = &self.members[b];
+            let a = self.assignment;
+            let parts: Vec<f64> = idx
+                .par_chunks(CHUNK)
+                .map(|chunk| {
+                    chunk
+                        .iter()
+                        .map(|&i| {
+                            let r = pb
+                                .project_constrained(a.positions[i as usize], a.normals[i as usize])
+                                .residual as f64;
+                            r * r
+                        })
+                        .sum::<f64>()
+                })
+                .collect();
+            total += parts.iter().sum::<f64>();
+        }
+        total
+    }
+
+    /// Data energy plus the cap term, for a world skeleton.
+    pub fn total_energy(&self, w: &WorldSkeleton) -> f64 {
+        self.energy(&w.bones()) + self.cap.as_ref().map_or(0.0, |c| c.energy(w))
+    }
+}
+
+/// Outcome of one LM iteration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LmStep {
+    pub energy_before: f64,
+    pub energy_after: f64,
+    pub accepted: bool,
+    /// Norm of the step taken (0 when rejected).
+    pub step_norm: f64,
+}
+
+/// Per-bone derivatives of `(c1, c2, r1, r2)` with respect to one parameter.
+#[derive(Clone, Copy, Debug, Default)]
+struct GeoDeriv {
+    dc1: Vec3,
+    dc2: Vec3,
+    dr1: f32,
+    dr2: f32,
+}
+
+/// Normal-equation terms of a parameter group at the current state: `(JᵀJ, Jᵀr, energy)`
+/// (row-major `MAX_PARAMS × MAX_PARAMS`, upper triangle and diagonal filled).
+pub fn normal_equations(
+    w: &WorldSkeleton,
+    classes: &RadiusClasses,
+    params: &[Param],
+    terms: &EnergyTerms,
+    size: f32,
+) -> ([f64; MAX_PARAMS * MAX_PARAMS], [f64; MAX_PARAMS], f64) {
+    let k = params.len();
+    assert!(k > 0 && k <= MAX_PARAMS);
+    let base_bones = w.bones();
+    let n_bones = base_bones.len();
+    // Geometry Jacobian by central differences of the forward kinematics.
+    let mut geo = vec![[GeoDeriv::default(); MAX_PARAMS]; n_bones];
+    let mut cap_deriv = [[Vec3::ZERO; 13]; MAX_PARAMS];
+    for (j, p) in params.iter().enumerate() {
+        let h = fd_step(p, size);
+        let mut plus = w.clone();
+        apply(&mut plus, classes, p, h);
+        let mut minus = w.clone();
+        apply(&mut minus, classes, p, -h);
+        let (bp, bm) = (plus.bones(), minus.bones());
+        if let Some(cap) = &terms.cap {
+            let (sp, sm) = (cap.samples(&plus), cap.samples(&minus));
+            for q in 0..13 {
+                cap_deriv[j][q] = (sp[q] - sm[q]) / (2.0 * h);
+            }
+        }
+        for &b in terms.bones {
+            let inv = 1.0 / (2.0 * h);
+            geo[b][j] = GeoDeriv {
+                dc1: (bp[b].c1 - bm[b].c1) * inv,
+                dc2: (bp[b].c2 - bm[b].c2) * inv,
+                dr1: (bp[b].r1 - bm[b].r1) * inv,
+                dr2: (bp[b].r2 - bm[b].r2) * inv,
+            };
+        }
+    }
+    // Accumulate JᵀJ, Jᵀr and the energy over the members, in a fixed order.
+    let mut jtj = [0.0f64; MAX_PARAMS * MAX_PARAMS];
+    let mut jtr = [0.0f64; MAX_PARAMS];
+    let mut energy = 0.0f64;
+    let a = terms.assignment;
+    for &b in terms.bones {
+        let pb: PreparedBone = base_bones[b].prepare();
+        let g = &geo[b];
+        let parts: Vec<([f64; MAX_PARAMS * MAX_PARAMS], [f64; MAX_PARAMS], f64)> = terms.members[b]
+            .par_chunks(CHUNK)
+            .map(|chunk| {
+                let mut jtj = [0.0f64; MAX_PARAMS * MAX_PARAMS];
+                let mut jtr = [0.0f64; MAX_PARAMS];
+                let mut e = 0.0f64;
+                let mut row = [0.0f64; MAX_PARAMS];
+                for &i in chunk {
+                    let proj =
+                        pb.project_constrained(a.positions[i as usize], a.normals[i as usize]);
+                    let grad = proj.gradient();
+                    let r = proj.residual as f64;
+                    e += r * r;
+                    for j in 0..k {
+                        let d = &g[j];
+                        row[j] = (grad.dc1.dot(d.dc1)
+                            + grad.dc2.dot(d.dc2)
+                            + grad.dr1 * d.dr1
+                            + grad.dr2 * d.dr2) as f64;
+                    }
+                    for j in 0..k {
+                        jtr[j] += row[j] * r;
+                        for m in j..k {
+                            jtj[j * MAX_PARAMS + m] += row[j] * row[m];
+                        }
+                    }
+                }
+                (jtj, jtr, e)
+            })
+            .collect();
+        for (pj, pr, pe) in parts {
+            for x in 0..MAX_PARAMS * MAX_PARAMS {
+                jtj[x] += pj[x];
+            }
+            for x in 0..MAX_PARAMS {
+                jtr[x] += pr[x];
+            }
+            energy += pe;
+        }
+    }
+    if let Some(cap) = &terms.cap {
+        for (q, (r, e)) in cap.residuals(w).iter().enumerate() {
+            let mut row = [0.0f64; MAX_PARAMS];
+            for j in 0..k {
+                row[j] = cap.weight * e.dot(cap_deriv[j][q]) as f64;
+            }
+            energy += r * r;
+            for j in 0..k {
+                jtr[j] += row[j] * r;
+                for m in j..k {
+                    jtj[j * MAX_PARAMS + m] += row[j] * row[m];
+                }
+            }
+        }
+    }
+    (jtj, jtr, energy)
+}
+
+/// One Levenberg–Marquardt iteration of `params` on the energy `terms`; `w` is updated when
+/// the step is accepted. `lambda` is the damping, adapted in place.
+#[allow(clippy::too_many_arguments)]
+pub fn lm_iteration(
+    w: &mut WorldSkeleton,
+    classes: &RadiusClasses,
+    limits: &Limits,
+    params: &[Param],
+    terms: &EnergyTerms,
+    lambda: &mut f64,
+    size: f32,
+    clamp_bones: &[usize],
+) -> LmStep {
+    let k = params.len();
+    let (mut jtj, jtr, energy) = normal_equations(w, classes, params, terms, size);
+    for j in 0..k {
+        for m in 0..j {
+            jtj[j * MAX_PARAMS + m] = jtj[m * MAX_PARAMS + j];
+        }
+    }
+    // Damped normal equations.
+    let mut mat = [0.0f64; MAX_PARAMS * MAX_PARAMS];
+    let mut rhs = [0.0f64; MAX_PARAMS];
+    for j in 0..k {
+        for m in 0..k {
+            mat[j * MAX_PARAMS + m] = jtj[j * MAX_PARAMS + m];
+        }
+        let d = jtj[j * MAX_PARAMS + j];
+        mat[j * MAX_PARAMS + j] = d + *lambda * d.max(1e-12);
+        rhs[j] = -jtr[j];
+    }
+    let Some(delta) = solve(&mut mat, &mut rhs, k) else {
+        *lambda *= 10.0;
+        return LmStep {
+            energy_before: energy,
+            energy_after: energy,
+            accepted: false,
+            step_norm: 0.0,
+        };
+    };
+    let mut trial = w.clone();
+    for (j, p) in params.iter().enumerate() {
+        apply(&mut trial, classes, p, delta[j] as f32);
+    }
+    limits.clamp(&mut trial, classes, clamp_bones);
+    let after = terms.total_energy(&trial);
+    if after < energy {
+        *w = trial;
+        *lambda = (*lambda / 10.0).max(1e-9);
+        let norm = delta[..k].iter().map(|d| d * d).sum::<f64>().sqrt();
+        LmStep {
+            energy_before: energy,
+            energy_after: after,
+            accepted: true,
+            step_norm: norm,
+        }
+    } else {
+        *lambda = (*lambda * 10.0).min(1e12);
+        LmStep {
+            energy_before: energy,
+            energy_after: energy,
+            accepted: false,
+            step_norm: 0.0,
+        }
+    }
+}
+
+/// Solves the `k × k` system in place by Gaussian elimination with partial pivoting.
+fn solve(
+    m: &mut [f64; MAX_PARAMS * MAX_PARAMS],
+    rhs: &mut [f64; MAX_PARAMS],
+    k: usize,
+) -> Option<[f64; MAX_PARAMS]> {
+    for col in 0..k {
+        let piv = (col..k).max_by(|&x, &y| {
+            m[x * MAX_PARAMS + col]
+                .abs()
+                .total_cmp(&m[y * MAX_PARAMS + col].abs())
+        })?;
+        if !(m[piv * MAX_PARAMS + col].abs() > 1e-300) {
+            return None;
+        }
+        if piv != col {
+            for c in 0..k {
+                m.swap(piv * MAX_PARAMS + c, col * MAX_PARAMS + c);
+            }
+            rhs.swap(piv, col);
+        }
+        for r in col + 1..k {
+            let f = m[r * MAX_PARAMS + col] / m[col * MAX_PARAMS + col];
+            for c in col..k {
+                m[r * MAX_PARAMS + c] -= f * m[col * MAX_PARAMS + c];
+            }
+            rhs[r] -= f * rhs[col];
+        }
+    }
+    let mut x = [0.0f64; MAX_PARAMS];
+    for r in (0..k).rev() {
+        let mut s = rhs[r];
+        for c in r + 1..k {
+            s -= m[r * MAX_PARAMS + c] * x[c];
+        }
+        x[r] = s / m[r * MAX_PARAMS + r];
+        if !x[r].is_finite() {
+            return None;
+        }
+    }
+    Some(x)
+}

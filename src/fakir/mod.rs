@@ -1,0 +1,16 @@
+//! FAKIR: Forward And bacKward Iterative Registration of a sphere-mesh anatomy to a point set
+//! (thesis ch. 2; paper 003; paper 001 appendices A–C).
+//!
+//! | stage | module |
+//! |---|---|
+//! | point-to-bone assignment `P_k` with the cone preference | [`assign`] |
+//! | world-space skeleton edits and shared radii | [`world`] |
+//! | Levenberg–Marquardt on parameter groups (eq. 2.6–2.15) | [`lm`] |
+//! | one-bone, two-bone, root-block fits; bootstrap; work units | [`solver`] |
+//! | Algorithm 1 on a chain; whole-skeleton order with backtracking | [`schedule`] |
+
+pub mod assign;
+pub mod lm;
+pub mod schedule;
+pub mod solver;
+pub mod world;

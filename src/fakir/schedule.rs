@@ -1,0 +1,169 @@
+//! The FAKIR schedule: Algorithm 1 on each chain (thesis §2.4.1) and the whole-skeleton order
+//! with backtracking (§2.4.2).
+//!
+//! ## A chain (Algorithm 1)
+//! 1. *Initial forward pass*: one-bone fit of the first bone (rotation, both radii, length);
+//!    then for each next bone, a one-bone fit (rotation about the shared joint, length, free
+//!    radius) followed by the two-bone fit of the joint it shares with its predecessor; the last
+//!    bone's length and free radius come from its one-bone fit.
+//! 2. *Forward and backward passes*: the order is reversed, every consecutive pair gets a
+//!    two-bone fit, then the extremity bone at the end of the pass gets a one-bone fit (its
+//!    free end: the chain's tip after a forward pass, the chain's anchor after a backward pass
+//!    — which only moves when the anchor is free, as in the papers' chain experiment).
+//! 3. **Convergence (our choice):** passes stop when the chain's energy decreases by less
+//!    than `chain_tolerance` (relative, default 1e-3) over a pass, or after `max_passes`.
+//!
+//! ## The whole skeleton
+//! Chains are registered in the template's order (spine, legs, arms for the human). The root
+//! block (pelvis: position, orientation and common scale) is refitted after each spine pass
+//! ("the spine chain is registered, refining the pelvis position and scale"). Limb chains keep
+//! their anchor joint fixed while they are registered. After all chains, the whole order is
+//! repeated (**backtracking**: the spine is questioned again with the points the limbs have
+//! taken, then the limbs from their moved anchors) until the mean distance (eq. 2.16) improves
+//! by less than `skeleton_tolerance` (relative, default 1e-3) or `max_iterations` is reached.
+
+use super::solver::{Cancelled, Solver};
+use super::world::End;
+
+/// Schedule settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ScheduleSettings {
+    /// Forward/backward passes per chain visit after the first.
+    pub max_passes: usize,
+    /// Relative chain-energy decrease under which the passes stop.
+    pub chain_tolerance: f64,
+    /// Whole-skeleton iterations.
+    pub max_iterations: usize,
+    /// Relative mean-distance decrease under which the whole-skeleton loop stops.
+    pub skeleton_tolerance: f64,
+}
+
+impl Default for ScheduleSettings {
+    fn default() -> Self {
+        ScheduleSettings {
+            max_passes: 10,
+            chain_tolerance: 1e-3,
+            max_iterations: 4,
+            skeleton_tolerance: 1e-3,
+        }
+    }
+}
+
+/// Algorithm 1, lines 1–10: the initial forward pass over `chain`.
+pub fn chain_initial_pass(s: &mut Solver, chain: &[usize]) -> Result<(), Cancelled> {
+    s.activity.pass = 0;
+    s.calibrating = true;
+    let r = (|| {
+        s.one_bone(chain[0], End::Second, true)?;
+        for k in 0..chain.len().saturating_sub(1) {
+            s.one_bone(chain[k + 1], End::Second, false)?;
+            s.two_bone(chain[k], chain[k + 1])?;
+        }
+        Ok(())
+    })();
+    s.calibrating = false;
+    r
+}
+
+/// One forward (`reverse = false`) or backward pass of two-bone fits, then the one-bone fit of
+/// the extremity reached (Algorithm 1, lines 13–19).
+pub fn chain_pass(s: &mut Solver, chain: &[usize], reverse: bool) -> Result<(), Cancelled> {
+    let k = chain.len();
+    if reverse {
+        for i in (0..k.saturating_sub(1)).rev() {
+            s.two_bone(chain[i], chain[i + 1])?;
+        }
+        s.one_bone(chain[0], End::First, false)?;
+    } else {
+        for i in 0..k.saturating_sub(1) {
+            s.two_bone(chain[i], chain[i + 1])?;
+        }
+        s.one_bone(chain[k - 1], End::Second, false)?;
+    }
+    Ok(())
+}
+
+/// Energy of a chain's points (bones and their followers).
+pub fn chain_energy(s: &Solver, chain: &[usize]) -> f64 {
+    let mut bones = Vec::new();
+    for &b in chain {
+        bones.extend(s.with_followers(b));
+    }
+    s.energy_of(&bones)
+}
+
+/// Forward/backward passes until the chain energy stops decreasing (see the module docs).
+/// The first pass after the initial forward pass goes backward. Returns the passes run.
+pub fn chain_passes(
+    s: &mut Solver,
+    chain: &[usize],
+    settings: &ScheduleSettings,
+    mut reverse: bool,
+) -> Result<usize, Cancelled> {
+    let mut before = chain_energy(s, chain);
+    let mut passes = 0;
+    while passes < settings.max_passes {
+        s.activity.pass = passes + 1;
+        chain_pass(s, chain, reverse)?;
+        passes += 1;
+        reverse = !reverse;
+        let after = chain_energy(s, chain);
+        if before - after <= settings.chain_tolerance * before.max(1e-30) {
+            break;
+        }
+        before = after;
+    }
+    Ok(passes)
+}
+
+/// Registers a single chain from scratch (the papers' chain experiment): initial forward pass
+/// then passes to convergence.
+pub fn register_chain(
+    s: &mut Solver,
+    chain: &[usize],
+    settings: &ScheduleSettings,
+) -> Result<usize, Cancelled> {
+    s.activity.phase = "chain";
+    s.refresh()?;
+    chain_initial_pass(s, chain)?;
+    let passes = chain_passes(s, chain, settings, true)?;
+    Ok(passes + 1)
+}
+
+/// Registers the whole skeleton (see the module docs). Returns the iterations run.
+pub fn register_skeleton(
+    s: &mut Solver,
+    settings: &ScheduleSettings,
+    fresh: bool,
+) -> Result<usize, Cancelled> {
+    let t = s.world.template.clone();
+    s.refresh()?;
+    if fresh {
+        s.block()?;
+    }
+    let mut before = s.mean_distance();
+    let mut iterations = 0;
+    for it in 0..settings.max_iterations {
+        s.activity.iteration = it;
+        for (ci, chain) in t.chains.iter().enumerate() {
+            s.activity.phase = "chain";
+            s.activity.chain = Some(chain.name.clone());
+            if it == 0 && fresh {
+                chain_initial_pass(s, &chain.bones)?;
+            }
+            chain_passes(s, &chain.bones, settings, true)?;
+            if ci == 0 {
+                s.block()?;
+            }
+        }
+        s.activity.chain = None;
+        s.block()?;
+        iterations += 1;
+        let after = s.mean_distance();
+        if before - after <= settings.skeleton_tolerance * before.max(1e-30) {
+            break;
+        }
+        before = after;
+    }
+    Ok(iterations)
+}

@@ -1,0 +1,269 @@
+//! A world-space view of a [`Skeleton`] that FAKIR's parameters edit directly.
+//!
+//! The skeleton stores rotations relative to the parent; FAKIR's moves are easier to state in
+//! world space ("rotate this bone about an axis through its first joint, its descendants
+//! following", "move the joint between two bones while both outer joints stay put").
+//! [`WorldSkeleton`] keeps each bone's **world frame**, length and radii, the root placement and
+//! block scale; joints are derived by forward kinematics (`c1` of a bone is the end of its
+//! parent, or the root). [`WorldSkeleton::to_skeleton`] converts back.
+//!
+//! Constraints are re-applied after every edit ([`WorldSkeleton::enforce`]): block bones keep
+//! their rest frames relative to the root frame and `rest length × block scale`; followers
+//! keep their rest frame relative to their leader and `ratio × leader length`; radii shared
+//! along chains stay equal ([`RadiusClasses`]).
+
+use crate::anatomy::template::{BoneKind, Template};
+use crate::anatomy::{Posed, Skeleton};
+use crate::geometry::Bone;
+use crate::math::{Quat, Vec3};
+use std::sync::Arc;
+
+/// Which end of a bone.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum End {
+    /// `c1`, `r1`.
+    First,
+    /// `c2`, `r2`.
+    Second,
+}
+
+/// Classes of bone ends whose radius is one shared variable: consecutive bones of a chain
+/// (possibly through a follower bone) share their joint radius (thesis §2.1).
+#[derive(Clone, Debug)]
+pub struct RadiusClasses {
+    /// Class id of `(bone, End::First)` at `2 * bone`, of `(bone, End::Second)` at `2 * bone + 1`.
+    class: Vec<usize>,
+    /// Members of each class.
+    pub members: Vec<Vec<(usize, End)>>,
+}
+
+impl RadiusClasses {
+    /// Builds the classes of a template.
+    pub fn new(t: &Template) -> Self {
+        let n = t.bones.len() * 2;
+        let mut parent: Vec<usize> = (0..n).collect();
+        fn find(p: &mut [usize], mut x: usize) -> usize {
+            while p[x] != x {
+                p[x] = p[p[x]];
+                x = p[x];
+            }
+            x
+        }
+        let chain_of = |b: usize| -> Option<usize> {
+            match t.bones[b].kind {
+                BoneKind::Follower { leader, .. } => t.bones[leader].chain.map(|c| c.0),
+                _ => t.bones[b].chain.map(|c| c.0),
+            }
+        };
+        for (c, def) in t.bones.iter().enumerate() {
+            let Some(p) = def.parent else { continue };
+            let follower_of_p =
+                matches!(def.kind, BoneKind::Follower { leader, .. } if leader == p);
+            let same_chain = chain_of(c).is_some() && chain_of(c) == chain_of(p);
+            if follower_of_p || same_chain {
+                let (a, b) = (find(&mut parent, 2 * p + 1), find(&mut parent, 2 * c));
+                parent[a] = b;
+            }
+        }
+        let mut ids = std::collections::BTreeMap::new();
+        let mut class = vec![0; n];
+        let mut members: Vec<Vec<(usize, End)>> = Vec::new();
+        for x in 0..n {
+            let r = find(&mut parent, x);
+            let next = ids.len();
+            let id = *ids.entry(r).or_insert(next);
+            if id == members.len() {
+                members.push(Vec::new());
+            }
+            class[x] = id;
+            members[id].push((x / 2, if x % 2 == 0 { End::First } else { End::Second }));
+        }
+        RadiusClasses { class, members }
+    }
+
+    /// The class of a bone end.
+    pub fn class_of(&self, bone: usize, end: End) -> usize {
+        self.class[2 * bone + (end == End::Second) as usize]
+    }
+}
+
+/// World-space skeleton state (see the module docs).
+#[derive(Clone, Debug)]
+pub struct WorldSkeleton {
+    pub template: Arc<Template>,
+    pub root_position: Vec3,
+    pub root_rotation: Quat,
+    pub block_scale: f32,
+    /// World frame of each bone (X along the bone).
+    pub frames: Vec<Quat>,
+    pub lengths: Vec<f32>,
+    pub r1: Vec<f32>,
+    pub r2: Vec<f32>,
+    /// Rest rotation of each bone relative to its parent (constraints use it).
+    rest_relative: Vec<Quat>,
+    /// Rest lengths and radii of the template (unscaled).
+    rest_lengths: Vec<f32>,
+}
+
+impl WorldSkeleton {
+    /// The world view of a skeleton.
+    pub fn from_skeleton(s: &Skeleton) -> Self {
+        let posed = s.pose();
+        let rest = Skeleton::rest(s.template.clone());
+        WorldSkeleton {
+            template: s.template.clone(),
+            root_position: s.root_position,
+            root_rotation: s.root_rotation,
+            block_scale: s.block_scale,
+            frames: posed.frames,
+            lengths: s.bones.iter().map(|b| b.length).collect(),
+            r1: s.bones.iter().map(|b| b.r1).collect(),
+            r2: s.bones.iter().map(|b| b.r2).collect(),
+            rest_relative: rest.bones.iter().map(|b| b.rotation).collect(),
+            rest_lengths: rest.bones.iter().map(|b| b.length).collect(),
+        }
+    }
+
+    /// Back to a relative-rotation skeleton.
+    pub fn to_skeleton(&self) -> Skeleton {
+        let t = &self.template;
+        let bones = t
+            .bones
+            .iter()
+            .enumerate()
+            .map(|(i, def)| {
+                let parent = def
+                    .parent
+                    .map(|p| self.frames[p])
+                    .unwrap_or(self.root_rotation);
+                crate::anatomy::BoneState {
+                    rotation: (parent.inverse() * self.frames[i]).normalize(),
+                    length: self.lengths[i],
+                    r1: self.r1[i],
+                    r2: self.r2[i],
+                }
+            })
+            .collect();
+        Skeleton {
+            template: t.clone(),
+            root_position: self.root_position,
+            root_rotation: self.root_rotation,
+            block_scale: self.block_scale,
+            bones,
+        }
+    }
+
+    /// World bones and joints by forward kinematics over the world frames.
+    pub fn pose(&self) -> Posed {
+        let t = &self.template;
+        let mut bones = Vec::with_capacity(t.bones.len());
+        let mut joints = vec![Vec3::ZERO; t.joints.len()];
+        joints[t.root] = self.root_position;
+        for (i, def) in t.bones.iter().enumerate() {
+            let c1: Vec3 = match def.parent {
+                Some(p) => {
+                    let b: &Bone = &bones[p];
+                    b.c2
+                }
+                None => self.root_position,
+            };
+            let c2 = c1 + self.frames[i] * Vec3::new(self.lengths[i], 0.0, 0.0);
+            bones.push(Bone::new(c1, self.r1[i], c2, self.r2[i]));
+            joints[def.to] = c2;
+        }
+        Posed {
+            bones,
+            frames: self.frames.clone(),
+            joints,
+        }
+    }
+
+    /// World bones only.
+    pub fn bones(&self) -> Vec<Bone> {
+        self.pose().bones
+    }
+
+    /// Re-applies block and follower constraints (see the module docs).
+    pub fn enforce(&mut self) {
+        let t = self.template.clone();
+        for (i, def) in t.bones.iter().enumerate() {
+            match def.kind {
+                BoneKind::Free => {}
+                BoneKind::Block => {
+                    self.frames[i] = (self.root_rotation * self.rest_relative[i]).normalize();
+                    self.lengths[i] = self.rest_lengths[i] * self.block_scale;
+                }
+                BoneKind::Follower { leader, ratio } => {
+                    self.frames[i] = (self.frames[leader] * self.rest_relative[i]).normalize();
+                    self.lengths[i] = ratio * self.lengths[leader];
+                }
+            }
+        }
+    }
+
+    /// Rotates bone `b` by the world rotation `q` about its first joint; its descendants follow.
+    pub fn rotate_subtree(&mut self, b: usize, q: Quat) {
+        for d in self.template.subtree(b) {
+            self.frames[d] = (q * self.frames[d]).normalize();
+        }
+    }
+
+    /// Points bone `b` (first joint fixed) at `target`: minimal rotation of its frame and new
+    /// length; descendants keep their world frames (they translate with the bone's end).
+    pub fn aim(&mut self, b: usize, c1: Vec3, target: Vec3) {
+        let d = target - c1;
+        let len = d.length();
+        if len < 1e-12 {
+            return;
+        }
+        let axis = self.frames[b] * Vec3::X;
+        let q = crate::geometry::frames::rotation_arc(axis, d / len);
+        self.frames[b] = (q * self.frames[b]).normalize();
+        self.lengths[b] = len;
+    }
+
+    /// Sets the radius of a bone end and of every end sharing it.
+    pub fn set_radius(&mut self, classes: &RadiusClasses, bone: usize, end: End, value: f32) {
+        let c = classes.class_of(bone, end);
+        for &(b, e) in &classes.members[c] {
+            match e {
+                End::First => self.r1[b] = value,
+                End::Second => self.r2[b] = value,
+            }
+        }
+    }
+
+    /// Radius of a bone end.
+    pub fn radius(&self, bone: usize, end: End) -> f32 {
+        match end {
+            End::First => self.r1[bone],
+            End::Second => self.r2[bone],
+        }
+    }
+
+    /// Rotates the whole skeleton about the root joint by `q`.
+    pub fn rotate_all(&mut self, q: Quat) {
+        self.root_rotation = (q * self.root_rotation).normalize();
+        for f in &mut self.frames {
+            *f = (q * *f).normalize();
+        }
+    }
+
+    /// Scales the root block by `k` about the root (block lengths and radii).
+    pub fn scale_block(&mut self, k: f32) {
+        self.block_scale *= k;
+        let t = self.template.clone();
+        for (i, def) in t.bones.iter().enumerate() {
+            if def.kind == BoneKind::Block {
+                self.r1[i] *= k;
+                self.r2[i] *= k;
+            }
+        }
+        self.enforce();
+    }
+
+    /// Rest length of bone `b` in template units.
+    pub fn rest_length(&self, b: usize) -> f32 {
+        self.rest_lengths[b]
+    }
+}
