@@ -6,6 +6,7 @@
 //! | `info FILE` | points, bounding box, normals present, scale estimate |
 //! | `normals IN OUT [--k 16]` | (re-)estimates oriented normals, points kept in input order |
 //! | `synth OUT.ply [--template human] [--seed N] ...` | a synthetic statue with ground truth |
+//! | `register IN.ply [--template human] [--anchor x,y,z] [--up y] [--out FIT.json] [--labels OUT.ply]` | FAKIR registration |
 //! | `bench [--json] [--only PREFIX]` | the benchmarks (see [`crate::bench`]) |
 
 use crate::anatomy::Template;
@@ -14,6 +15,8 @@ use crate::cloud::ply::{ReadOptions, WriteOptions, read_ply_with, write_ply};
 use crate::error::{Error, Result};
 use crate::synth::{Cut, SynthOptions, generate};
 use clap::{Parser, Subcommand};
+
+mod register;
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -94,6 +97,28 @@ enum Command {
         #[arg(long)]
         labels: bool,
     },
+    /// Fits an anatomy template to a statue with FAKIR.
+    Register {
+        input: PathBuf,
+        /// Template name (human, centaur, quadruped, mermaid) or template file.
+        #[arg(long, default_value = "human")]
+        template: String,
+        /// Root (pelvis) position `x,y,z` instead of the automatic placement.
+        #[arg(long)]
+        anchor: Option<String>,
+        /// The statue's up axis: `x`, `y`, `z`, `-x`, … or `x,y,z`.
+        #[arg(long)]
+        up: Option<String>,
+        /// Write the fitted skeleton here (JSON).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Write the cloud with each point's bone index (`bone` property) here.
+        #[arg(long)]
+        labels: Option<PathBuf>,
+        /// Drop points with NaN/inf coordinates instead of refusing the file.
+        #[arg(long)]
+        drop_non_finite: bool,
+    },
     /// Runs the benchmarks.
     Bench {
         /// One JSON object per line.
@@ -170,11 +195,28 @@ where
             };
             synth(&output, &template, &opts, truth.as_deref(), labels)
         }
+        Command::Register {
+            input,
+            template,
+            anchor,
+            up,
+            out,
+            labels,
+            drop_non_finite,
+        } => crate::cli::register::run(
+            &input,
+            &template,
+            anchor.as_deref(),
+            up.as_deref(),
+            out.as_deref(),
+            labels.as_deref(),
+            drop_non_finite,
+        ),
         Command::Bench { json, only, runs } => crate::bench::run_cli(json, only.as_deref(), runs),
     }
 }
 
-fn read(path: &Path, drop_non_finite: bool) -> Result<crate::cloud::PointCloud> {
+pub(crate) fn read(path: &Path, drop_non_finite: bool) -> Result<crate::cloud::PointCloud> {
     Ok(read_ply_with(
         path,
         &ReadOptions {

@@ -20,7 +20,7 @@
 //! **Choice:** loose proportion bounds (§2.4.1, §2.6.1) are enforced by clamping after each
 //! step ([`Limits`]): lengths stay within `[0.2, 3.5] ×` the template's (scaled) length and the
 //! ratio of consecutive chain bones within `4 ×` of the template's ratio either way, radii
-//! within `[0.03, 3] ×` the template's, and `|r2 − r1| ≤ 0.9 l` so no sphere swallows its
+//! within `[0.03, 1.5] ×` the template's, and `|r2 − r1| ≤ 0.9 l` so no sphere swallows its
 //! neighbour. The energy is evaluated after clamping, so a clamped step is only accepted when
 //! it still lowers the energy.
 
@@ -166,7 +166,7 @@ impl Limits {
             l.min_len[i] = lo * rest;
             l.max_len[i] = hi * rest;
             l.min_r[i] = [0.03 * def.r1 * scale, 0.03 * def.r2 * scale];
-            l.max_r[i] = [3.0 * def.r1 * scale, 3.0 * def.r2 * scale];
+            l.max_r[i] = [1.5 * def.r1 * scale, 1.5 * def.r2 * scale];
             if let Some((c, pos)) = def.chain {
                 if pos > 0 {
                     let prev = t.chains[c].bones[pos - 1];
@@ -184,12 +184,13 @@ impl Limits {
             if t.bones[b].kind != BoneKind::Free {
                 continue;
             }
-            let mut len = w.lengths[b].clamp(self.min_len[b], self.max_len[b]);
+            let mut len = w.lengths[b];
             if let Some((prev, ratio)) = self.prev_ratio[b] {
                 let lp = w.lengths[prev];
                 len = len.clamp(0.25 * ratio * lp, 4.0 * ratio * lp);
             }
-            w.lengths[b] = len;
+            // The absolute bounds win over the ratio bound.
+            w.lengths[b] = len.clamp(self.min_len[b], self.max_len[b]);
             for (k, end) in [(0, End::First), (1, End::Second)] {
                 let r = w.radius(b, end);
                 let c = r.clamp(self.min_r[b][k], self.max_r[b][k]);
@@ -219,59 +220,81 @@ pub struct EnergyTerms<'a> {
     pub members: &'a [Vec<u32>],
     /// Bones whose points make up the energy.
     pub bones: &'a [usize],
-    /// Optional free-cap term of an extremity bone.
-    pub cap: Option<CapTerm<'a>>,
+    /// Optional occupancy term (model → data).
+    pub cap: Option<OccupancyTerm<'a>>,
 }
 
-/// The free-cap term of a chain extremity (thesis §2.5.1: "modify the one-bone energy of the
-/// first and last bones by adding a term corresponding to the distance of the free caps to
-/// the data points"). Without it, nothing stops an extremity from growing into a long thin
-/// cone: its lateral surface still fits the points while its cap floats away from the data.
+/// The occupancy term (model → data) of chain extremities: samples on the visible surface of
+/// a tip bone must lie on the data. The thesis names this remedy (§2.5.1: "adding a bone
+/// occupancy term to the one-bone energy", "a term corresponding to the distance of the free
+/// caps to the data points") for bones whose free end escapes the data; without it a bone
+/// can grow into empty space, or swell, while its points still fit. **Choice:** only tip
+/// bones (no children) and bones leaving a free root carry it, as the thesis proposes: on a
+/// mid-chain bone it would also penalise legitimate gaps in the data (a missing middle
+/// portion, fig. 2.12), and the two-bone fits already hold mid-chain joints. It is left out
+/// of the initial forward pass, where bones start far from the data and it would only pull
+/// them towards the nearest surface.
 ///
-/// **Choice:** 13 samples on the free hemisphere (its pole and two rings at 30° and 60°), each
-/// contributing `weight · max(0, |s − q| − slack)` with `q` the nearest data point (k-d tree,
-/// re-queried at each evaluation) and `slack` the data's typical point spacing, so a cap that
-/// lies on the data costs nothing (no bias towards dense spots) and a floating one is pulled
-/// back; `weight² · 13` equals the number of points the cap should carry, i.e. the bone's
-/// points times the cap's share of the bone's area.
-pub struct CapTerm<'a> {
-    pub bone: usize,
-    pub end: End,
+/// **Choice:** 32 samples per bone, fixed in the bone's own parameterisation so they move
+/// smoothly with it (24 on the cone: 4 stations along the axis × 6 around it; 4 on each cap:
+/// its pole and 3 directions 50° off it). A sample hidden inside another bone is skipped.
+/// Each visible sample contributes `weight · max(0, |s − q| − slack)` with `q` the nearest
+/// data point (k-d tree, re-queried at every evaluation) and `slack` twice the data's typical
+/// point spacing (gaps between samples reach about that), so a bone lying on the data pays nothing (no pull towards dense spots);
+/// `weight² = density × area / 32`, the number of points the sample's share of the bone would
+/// carry at the statue's average density, so a bone fully off the data costs like that many
+/// points at that distance.
+pub struct OccupancyTerm<'a> {
+    pub bones: Vec<usize>,
+    /// `weight` of each bone's samples (same order as `bones`).
+    pub weights: Vec<f64>,
     pub tree: &'a kiddo::ImmutableKdTree<f32, 3>,
     pub positions: &'a [Vec3],
-    pub weight: f64,
     /// Distance under which a sample counts as lying on the data.
     pub slack: f32,
 }
 
-/// Directions of the cap samples in the bone frame (free end at `+X`).
-fn cap_dirs() -> [Vec3; 13] {
-    let mut d = [Vec3::X; 13];
-    let mut k = 1;
-    for beta in [30f32, 60.0] {
-        let (sb, cb) = beta.to_radians().sin_cos();
-        for i in 0..6 {
-            let phi = i as f32 * std::f32::consts::TAU / 6.0 + if beta > 45.0 { 0.5 } else { 0.0 };
-            d[k] = Vec3::new(cb, sb * phi.cos(), sb * phi.sin());
+/// Samples per bone of the occupancy term.
+pub const OCCUPANCY_SAMPLES: usize = 32;
+
+/// World positions of the occupancy samples of bone `b` of `w` (see [`OccupancyTerm`]).
+pub fn occupancy_samples(w: &WorldSkeleton, bones: &[Bone], b: usize) -> [Vec3; OCCUPANCY_SAMPLES] {
+    let bone = bones[b];
+    let f = w.frames[b];
+    let (x, y, z) = (f * Vec3::X, f * Vec3::Y, f * Vec3::Z);
+    let l = bone.length();
+    let sin_a = if l > 1e-12 {
+        ((bone.r2 - bone.r1) / l).clamp(-0.99, 0.99)
+    } else {
+        0.0
+    };
+    let cos_a = (1.0 - sin_a * sin_a).sqrt();
+    let mut out = [Vec3::ZERO; OCCUPANCY_SAMPLES];
+    let mut k = 0;
+    for u in [0.125f32, 0.375, 0.625, 0.875] {
+        for j in 0..6 {
+            let phi = (j as f32 + 0.5 * (u * 8.0).round() % 2.0) * std::f32::consts::TAU / 6.0;
+            let v = phi.cos() * y + phi.sin() * z;
+            let n = cos_a * v - sin_a * x;
+            let r = bone.r1 + u * (bone.r2 - bone.r1);
+            out[k] = bone.c1 + (u * l) * x + r * n;
             k += 1;
         }
     }
-    d
+    let (s50, c50) = 50f32.to_radians().sin_cos();
+    for (c, r, sign) in [(bone.c2, bone.r2, 1.0f32), (bone.c1, bone.r1, -1.0)] {
+        out[k] = c + r * sign * x;
+        k += 1;
+        for j in 0..3 {
+            let phi = j as f32 * std::f32::consts::TAU / 3.0;
+            out[k] = c + r * (sign * c50 * x + s50 * (phi.cos() * y + phi.sin() * z));
+            k += 1;
+        }
+    }
+    out
 }
 
-impl CapTerm<'_> {
-    /// World positions of the cap samples.
-    pub fn samples(&self, w: &WorldSkeleton) -> [Vec3; 13] {
-        let bone = w.bones()[self.bone];
-        let f = w.frames[self.bone];
-        let (c, r, sign) = match self.end {
-            End::Second => (bone.c2, bone.r2, 1.0),
-            End::First => (bone.c1, bone.r1, -1.0),
-        };
-        cap_dirs().map(|m| c + r * (f * (sign * m)))
-    }
-
-    /// Nearest data point of a sample.
+impl OccupancyTerm<'_> {
     fn nearest(&self, s: Vec3) -> Vec3 {
         let nn = self
             .tree
@@ -281,22 +304,48 @@ impl CapTerm<'_> {
         self.positions[nn.item as usize]
     }
 
-    /// Weighted residuals and their unit directions `(s − q)/|s − q|`.
-    fn residuals(&self, w: &WorldSkeleton) -> [(f64, Vec3); 13] {
-        self.samples(w).map(|s| {
-            let d = s - self.nearest(s);
-            let l = d.length();
-            if l <= self.slack {
-                (0.0, Vec3::ZERO)
-            } else {
-                (self.weight * (l - self.slack) as f64, d / l)
+    /// Weighted residuals and unit directions of every sample (zero for hidden samples and
+    /// samples within the slack), bone by bone.
+    fn residuals(&self, w: &WorldSkeleton) -> Vec<(f64, Vec3, f64)> {
+        let bones = w.bones();
+        let prepared: Vec<_> = bones.iter().map(|b| b.prepare()).collect();
+        let mut out = Vec::with_capacity(self.bones.len() * OCCUPANCY_SAMPLES);
+        for (bi, &b) in self.bones.iter().enumerate() {
+            let tol = 1e-4 * (bones[b].length() + bones[b].r1 + bones[b].r2);
+            for s in occupancy_samples(w, &bones, b) {
+                let hidden = prepared
+                    .iter()
+                    .enumerate()
+                    .any(|(o, pb)| o != b && pb.sdf_fast(s) < -tol);
+                if hidden {
+                    out.push((0.0, Vec3::ZERO, 0.0));
+                    continue;
+                }
+                let d = s - self.nearest(s);
+                let l = d.length();
+                if l <= self.slack {
+                    out.push((0.0, Vec3::ZERO, 0.0));
+                } else {
+                    let wgt = self.weights[bi];
+                    out.push((wgt * (l - self.slack) as f64, d / l, wgt));
+                }
             }
-        })
+        }
+        out
     }
 
     /// Energy of the term.
     pub fn energy(&self, w: &WorldSkeleton) -> f64 {
-        self.residuals(w).iter().map(|(r, _)| r * r).sum()
+        self.residuals(w).iter().map(|(r, _, _)| r * r).sum()
+    }
+
+    /// All samples of the term's bones, concatenated.
+    fn all_samples(&self, w: &WorldSkeleton) -> Vec<Vec3> {
+        let bones = w.bones();
+        self.bones
+            .iter()
+            .flat_map(|&b| occupancy_samples(w, &bones, b))
+            .collect()
     }
 }
 
@@ -372,7 +421,7 @@ pub fn normal_equations(
     let n_bones = base_bones.len();
     // Geometry Jacobian by central differences of the forward kinematics.
     let mut geo = vec![[GeoDeriv::default(); MAX_PARAMS]; n_bones];
-    let mut cap_deriv = [[Vec3::ZERO; 13]; MAX_PARAMS];
+    let mut cap_deriv: Vec<Vec<Vec3>> = vec![Vec::new(); MAX_PARAMS];
     for (j, p) in params.iter().enumerate() {
         let h = fd_step(p, size);
         let mut plus = w.clone();
@@ -381,10 +430,12 @@ pub fn normal_equations(
         apply(&mut minus, classes, p, -h);
         let (bp, bm) = (plus.bones(), minus.bones());
         if let Some(cap) = &terms.cap {
-            let (sp, sm) = (cap.samples(&plus), cap.samples(&minus));
-            for q in 0..13 {
-                cap_deriv[j][q] = (sp[q] - sm[q]) / (2.0 * h);
-            }
+            let (sp, sm) = (cap.all_samples(&plus), cap.all_samples(&minus));
+            cap_deriv[j] = sp
+                .iter()
+                .zip(&sm)
+                .map(|(a, b)| (*a - *b) / (2.0 * h))
+                .collect();
         }
         for &b in terms.bones {
             let inv = 1.0 / (2.0 * h);
@@ -445,10 +496,10 @@ pub fn normal_equations(
         }
     }
     if let Some(cap) = &terms.cap {
-        for (q, (r, e)) in cap.residuals(w).iter().enumerate() {
+        for (q, (r, e, wgt)) in cap.residuals(w).iter().enumerate() {
             let mut row = [0.0f64; MAX_PARAMS];
             for j in 0..k {
-                row[j] = cap.weight * e.dot(cap_deriv[j][q]) as f64;
+                row[j] = wgt * e.dot(cap_deriv[j][q]) as f64;
             }
             energy += r * r;
             for j in 0..k {

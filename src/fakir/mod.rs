@@ -8,9 +8,16 @@
 //! | Levenberg–Marquardt on parameter groups (eq. 2.6–2.15) | [`lm`] |
 //! | one-bone, two-bone, root-block fits; bootstrap; work units | [`solver`] |
 //! | Algorithm 1 on a chain; whole-skeleton order with backtracking | [`schedule`] |
+//! | automatic initial placement (PCA, candidate orientations) | [`init`] |
+//! | levels, the resumable `step(budget)` registration | [`registration`] |
 
 pub mod assign;
+pub mod init;
 pub mod lm;
+pub mod registration;
 pub mod schedule;
 pub mod solver;
 pub mod world;
+
+pub use init::Init;
+pub use registration::{Fit, Progress, Registration, RegistrationOptions, register};

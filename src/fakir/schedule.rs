@@ -2,7 +2,9 @@
 //! with backtracking (§2.4.2).
 //!
 //! ## A chain (Algorithm 1)
-//! 1. *Initial forward pass*: one-bone fit of the first bone (rotation, both radii, length);
+//! 1. *Initial forward pass*: a coarse direction search
+//!    ([`super::solver::Solver::search_direction`]) then the one-bone fit of the first bone
+//!    (rotation, both radii, length);
 //!    then for each next bone, a one-bone fit (rotation about the shared joint, length, free
 //!    radius) followed by the two-bone fit of the joint it shares with its predecessor; the last
 //!    bone's length and free radius come from its one-bone fit.
@@ -17,7 +19,10 @@
 //! Chains are registered in the template's order (spine, legs, arms for the human). The root
 //! block (pelvis: position, orientation and common scale) is refitted after each spine pass
 //! ("the spine chain is registered, refining the pelvis position and scale"). Limb chains keep
-//! their anchor joint fixed while they are registered. After all chains, the whole order is
+//! their anchor joint fixed while they are registered. **Choice:** the block is not fitted
+//! before the spine: on its own points alone (a blob inside the hips) its orientation is
+//! undetermined and a fit tilts the whole skeleton; after the spine's passes the attached
+//! bones pin it. After all chains, the whole order is
 //! repeated (**backtracking**: the spine is questioned again with the points the limbs have
 //! taken, then the limbs from their moved anchors) until the mean distance (eq. 2.16) improves
 //! by less than `skeleton_tolerance` (relative, default 1e-3) or `max_iterations` is reached.
@@ -50,12 +55,18 @@ impl Default for ScheduleSettings {
 }
 
 /// Algorithm 1, lines 1–10: the initial forward pass over `chain`.
-pub fn chain_initial_pass(s: &mut Solver, chain: &[usize]) -> Result<(), Cancelled> {
+pub fn chain_initial_pass(s: &mut Solver, chain: &[usize], search: bool) -> Result<(), Cancelled> {
     s.activity.pass = 0;
     s.calibrating = true;
     let r = (|| {
+        if search {
+            s.search_direction(chain[0])?;
+        }
         s.one_bone(chain[0], End::Second, true)?;
         for k in 0..chain.len().saturating_sub(1) {
+            if search {
+                s.search_direction(chain[k + 1])?;
+            }
             s.one_bone(chain[k + 1], End::Second, false)?;
             s.two_bone(chain[k], chain[k + 1])?;
         }
@@ -125,7 +136,7 @@ pub fn register_chain(
 ) -> Result<usize, Cancelled> {
     s.activity.phase = "chain";
     s.refresh()?;
-    chain_initial_pass(s, chain)?;
+    chain_initial_pass(s, chain, false)?;
     let passes = chain_passes(s, chain, settings, true)?;
     Ok(passes + 1)
 }
@@ -138,9 +149,6 @@ pub fn register_skeleton(
 ) -> Result<usize, Cancelled> {
     let t = s.world.template.clone();
     s.refresh()?;
-    if fresh {
-        s.block()?;
-    }
     let mut before = s.mean_distance();
     let mut iterations = 0;
     for it in 0..settings.max_iterations {
@@ -149,7 +157,9 @@ pub fn register_skeleton(
             s.activity.phase = "chain";
             s.activity.chain = Some(chain.name.clone());
             if it == 0 && fresh {
-                chain_initial_pass(s, &chain.bones)?;
+                // The first chain (the spine) takes its direction from the placement; limbs
+                // search theirs.
+                chain_initial_pass(s, &chain.bones, ci > 0)?;
             }
             chain_passes(s, &chain.bones, settings, true)?;
             if ci == 0 {

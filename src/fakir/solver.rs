@@ -5,7 +5,7 @@
 //! [`super::registration`]).
 
 use super::assign::Assignment;
-use super::lm::{CapTerm, EnergyTerms, Limits, Param, lm_iteration};
+use super::lm::{EnergyTerms, Limits, OCCUPANCY_SAMPLES, OccupancyTerm, Param, lm_iteration};
 use super::world::{End, RadiusClasses, WorldSkeleton};
 use crate::anatomy::template::BoneKind;
 use crate::geometry::{Bone, PreparedBone};
@@ -56,6 +56,8 @@ pub struct SolverSettings {
     pub lm_tolerance: f64,
     /// Points per slice of an assignment refresh (times bones refreshed).
     pub refresh_budget: usize,
+    /// Add the occupancy term (model → data, [`super::lm::OccupancyTerm`]) to every fit.
+    pub occupancy: bool,
 }
 
 impl Default for SolverSettings {
@@ -66,6 +68,7 @@ impl Default for SolverSettings {
             two_bone_rounds: 4,
             lm_tolerance: 1e-6,
             refresh_budget: 120_000,
+            occupancy: true,
         }
     }
 }
@@ -113,7 +116,7 @@ impl<'p> Solver<'p> {
     ) -> Self {
         let classes = RadiusClasses::new(&world.template);
         let limits = Limits::new(&world, scale);
-        let calibration_limits = Limits::with_length_range(&world, scale, 0.6, 1.6);
+        let calibration_limits = Limits::with_length_range(&world, scale, 0.75, 1.33);
         let n = world.template.bones.len();
         let size = scale * template_extent(&world.template);
         let tree_points = assignment.positions.clone();
@@ -211,65 +214,61 @@ impl<'p> Solver<'p> {
         v
     }
 
-    /// Runs LM iterations of `params` on the energy of `energy_bones` until they stop
-    /// improving; returns the final energy.
+    /// Runs LM iterations of `params` on the energy of `energy_bones` (their points, plus the
+    /// occupancy of their surface when enabled) until they stop improving; returns the final
+    /// energy.
     pub fn lm(
         &mut self,
         params: &[Param],
         energy_bones: &[usize],
         clamp_bones: &[usize],
     ) -> Result<f64, Cancelled> {
-        self.lm_with_cap(params, energy_bones, clamp_bones, None)
-    }
-
-    /// The free-cap term of `bone`'s `end` (see [`super::lm::CapTerm`]).
-    fn cap_weight(&self, (bone, end): &(usize, End)) -> f64 {
-        let b = self.world.bones()[*bone];
-        let pb = b.prepare();
-        let areas = pb.part_areas();
-        let total: f32 = areas.iter().sum();
-        let cap_share = if *end == End::Second {
-            areas[2]
-        } else {
-            areas[0]
-        } / total.max(1e-30);
-        let n: usize = self
-            .with_followers(*bone)
-            .iter()
-            .map(|&x| self.members[x].len())
-            .sum();
-        ((n as f64 * cap_share as f64) / 13.0).max(1.0).sqrt()
-    }
-
-    /// [`Solver::lm`] with an optional free-cap term.
-    pub fn lm_with_cap(
-        &mut self,
-        params: &[Param],
-        energy_bones: &[usize],
-        clamp_bones: &[usize],
-        cap: Option<(usize, End)>,
-    ) -> Result<f64, Cancelled> {
         let mut lambda = 0.01f64;
         let mut last = f64::INFINITY;
-        let cap_weight = cap.map(|c| (c.0, c.1, self.cap_weight(&c)));
+        // Occupancy weights (see `OccupancyTerm`), fixed for this LM loop.
+        // Only chain extremities get the occupancy term (see `OccupancyTerm`): bones without
+        // children, and bones leaving a free root.
+        let t = self.world.template.clone();
+        let tips: Vec<usize> = energy_bones
+            .iter()
+            .copied()
+            .filter(|&b| {
+                t.bones[b].children.is_empty() || (self.free_root && t.bones[b].parent.is_none())
+            })
+            .collect();
+        let weights: Vec<f64> = {
+            let bones = self.world.bones();
+            let total_area: f64 = bones.iter().map(|b| b.area() as f64).sum();
+            let density = self.assignment.len() as f64 / total_area.max(1e-30);
+            tips.iter()
+                .map(|&b| {
+                    (density * bones[b].area() as f64 / OCCUPANCY_SAMPLES as f64)
+                        .max(1.0)
+                        .sqrt()
+                })
+                .collect()
+        };
         for _ in 0..self.settings.lm_iterations {
+            let occupancy = match (
+                &self.tree,
+                self.settings.occupancy && !self.calibrating && !tips.is_empty(),
+            ) {
+                (Some(tree), true) => Some(OccupancyTerm {
+                    bones: tips.clone(),
+                    weights: weights.clone(),
+                    tree,
+                    positions: &self.tree_points,
+                    slack: 2.0 * self.spacing,
+                }),
+                _ => None,
+            };
             let terms = EnergyTerms {
                 assignment: &self.assignment,
                 members: &self.members,
                 bones: energy_bones,
-                cap: match (&cap_weight, &self.tree) {
-                    (Some((bone, end, weight)), Some(tree)) => Some(CapTerm {
-                        bone: *bone,
-                        end: *end,
-                        tree,
-                        positions: &self.tree_points,
-                        weight: *weight,
-                        slack: self.spacing,
-                    }),
-                    _ => None,
-                },
+                cap: occupancy,
             };
-            if terms.count() == 0 {
+            if terms.count() == 0 && terms.cap.is_none() {
                 return Ok(0.0);
             }
             let limits = if self.calibrating {
@@ -316,27 +315,21 @@ impl<'p> Solver<'p> {
         if self.members_of(&energy) == 0 {
             self.bootstrap(b)?;
         }
-        let t = self.world.template.clone();
-        let tip = match free {
-            End::Second => t.bones[b].children.is_empty(),
-            End::First => t.bones[b].parent.is_none() && self.free_root,
-        };
-        let cap = tip.then_some((b, free));
+
         for _ in 0..self.settings.one_bone_rounds {
             let before = self.energy_of(&energy);
             match free {
                 End::Second => {
                     let (a1, a2) = self.swing_axes(b);
-                    self.lm_with_cap(
+                    self.lm(
                         &[
                             Param::Swing { bone: b, axis: a1 },
                             Param::Swing { bone: b, axis: a2 },
                         ],
                         &energy,
                         &[b],
-                        cap,
                     )?;
-                    self.lm_with_cap(&[Param::Length { bone: b }], &energy, &[b], cap)?;
+                    self.lm(&[Param::Length { bone: b }], &energy, &[b])?;
                 }
                 End::First => {
                     // Free first joint: only a bone leaving a free root can move it.
@@ -345,10 +338,10 @@ impl<'p> Solver<'p> {
                     }
                     let axes =
                         [Vec3::X, Vec3::Y, Vec3::Z].map(|axis| Param::AnchorMove { bone: b, axis });
-                    self.lm_with_cap(&axes, &energy, &[b], cap)?;
+                    self.lm(&axes, &energy, &[b])?;
                 }
             }
-            self.lm_with_cap(&[Param::Radius { bone: b, end: free }], &energy, &[b], cap)?;
+            self.lm(&[Param::Radius { bone: b, end: free }], &energy, &[b])?;
             if both_radii {
                 let other = if free == End::Second {
                     End::First
@@ -406,7 +399,9 @@ impl<'p> Solver<'p> {
     }
 
     /// Fit of the root block (position, orientation, common scale) on the points of the block
-    /// bones and of the bones attached to them.
+    /// bones and of the bones attached to them (the first bones of the spine and the legs, whose
+    /// directions are what pins the block's orientation); the rest of the skeleton follows
+    /// rigidly.
     pub fn block(&mut self) -> Result<(), Cancelled> {
         let t = self.world.template.clone();
         let block: Vec<usize> = t.block_bones().collect();
@@ -450,6 +445,149 @@ impl<'p> Solver<'p> {
             cap: None,
         }
         .energy(&self.world.bones())
+    }
+
+    /// Coarse direction search for bone `b` before its one-bone calibration (our addition to
+    /// §2.4.1, which only rotates a bone "until some input points are projected onto it"): the
+    /// bone (its descendants following) is tried along its current direction and the 26
+    /// directions of the cube's faces, edges and corners, and the direction with the lowest
+    /// score is kept. The score has two sides, on a fixed subset of at most 2000 points:
+    /// * data → model: `Σ_p min(d_other(p), d_subtree(p))²`, each point's squared distance to
+    ///   the nearest bone, with the subtree moved;
+    /// * model → data (occupancy): for 24 samples on each subtree bone's surface that lie
+    ///   outside every other bone, `max(0, |s − q| − spacing)²` with `q` the nearest data
+    ///   point, weighted so that a fully unsupported skeleton would cost as much as all points
+    ///   at that distance. A bone thrust into empty space or swallowed by another body part
+    ///   pays for it.
+    /// Ties keep the earlier direction (the current one first).
+    pub fn search_direction(&mut self, b: usize) -> Result<(), Cancelled> {
+        let t = self.world.template.clone();
+        let subtree = t.subtree(b);
+        let in_sub: Vec<bool> = (0..t.bones.len()).map(|x| subtree.contains(&x)).collect();
+        let n = self.assignment.len();
+        if n == 0 {
+            return Ok(());
+        }
+        let step = (n / 2000).max(1);
+        let idx: Vec<usize> = (0..n).step_by(step).collect();
+        // Distance of each subset point to the nearest bone outside the subtree.
+        let nb = t.bones.len();
+        let d_other: Vec<f32> = idx
+            .iter()
+            .map(|&i| {
+                (0..nb)
+                    .filter(|&x| !in_sub[x] && self.assignment.enabled[x])
+                    .map(|x| self.assignment.distance(x, i))
+                    .fold(f32::INFINITY, f32::min)
+            })
+            .collect();
+        let axis = self.world.frames[b] * Vec3::X;
+        let mut dirs = vec![axis];
+        for x in -1i32..=1 {
+            for y in -1i32..=1 {
+                for z in -1i32..=1 {
+                    if x != 0 || y != 0 || z != 0 {
+                        dirs.push(Vec3::new(x as f32, y as f32, z as f32).normalize());
+                    }
+                }
+            }
+        }
+        let total_area: f32 = self.world.bones().iter().map(|x| x.area()).sum();
+        let mut best = (f64::INFINITY, 0usize);
+        for (k, d) in dirs.iter().enumerate() {
+            let mut trial = self.world.clone();
+            trial.rotate_subtree(b, crate::geometry::frames::rotation_arc(axis, *d));
+            trial.enforce();
+            let bones = trial.bones();
+            let prepared: Vec<PreparedBone> = bones.iter().map(|x| x.prepare()).collect();
+            let a = &self.assignment;
+            let mut e = 0.0f64;
+            for (j, &i) in idx.iter().enumerate() {
+                let mut m = d_other[j];
+                for &x in &subtree {
+                    m = m.min(
+                        prepared[x]
+                            .project_constrained(a.positions[i], a.normals[i])
+                            .distance,
+                    );
+                }
+                e += (m as f64) * (m as f64);
+            }
+            // Occupancy of the subtree's visible surface.
+            if let Some(tree) = &self.tree {
+                let mut rng = crate::rng::Rng::new(0x0cc + b as u64);
+                let per_bone = 24;
+                let weight = idx.len() as f64 / (per_bone as f64 * nb as f64);
+                let _ = total_area;
+                for &x in &subtree {
+                    for _ in 0..per_bone {
+                        let (sp, _) = prepared[x].sample_surface(&mut rng);
+                        if prepared
+                            .iter()
+                            .enumerate()
+                            .any(|(o, pb)| o != x && pb.sdf_fast(sp) < 0.0)
+                        {
+                            continue;
+                        }
+                        let nn = tree
+                            .query(&sp.to_array())
+                            .nearest_one::<kiddo::SquaredEuclidean<f32>>()
+                            .execute();
+                        let dist = (nn.distance.sqrt() - self.spacing).max(0.0) as f64;
+                        e += weight * dist * dist;
+                    }
+                }
+            }
+            if e < best.0 {
+                best = (e, k);
+            }
+            self.unit()?;
+        }
+        if best.1 != 0 {
+            self.world
+                .rotate_subtree(b, crate::geometry::frames::rotation_arc(axis, dirs[best.1]));
+            self.world.enforce();
+            self.refresh()?;
+        }
+        Ok(())
+    }
+
+    /// Model → data term: mean of `max(0, |s − q| − spacing)` over samples `s` of the bones'
+    /// visible surface (outside every other bone), `q` the nearest data point. Zero when every
+    /// part of the model lies on the data; large when bones stick out into empty space. With
+    /// the mean distance (data → model) it makes a two-sided fit measure.
+    pub fn occupancy(&self) -> f64 {
+        let Some(tree) = &self.tree else { return 0.0 };
+        let bones = self.world.bones();
+        let prepared: Vec<PreparedBone> = bones.iter().map(|b| b.prepare()).collect();
+        let mut rng = crate::rng::Rng::new(0x0ccu64);
+        let total_area: f32 = prepared
+            .iter()
+            .map(|b| b.part_areas().iter().sum::<f32>())
+            .sum();
+        let samples = 1500usize;
+        let (mut sum, mut count) = (0.0f64, 0usize);
+        for (x, pb) in prepared.iter().enumerate() {
+            let area: f32 = pb.part_areas().iter().sum();
+            let k = ((samples as f32 * area / total_area.max(1e-30)).ceil() as usize).max(4);
+            for _ in 0..k {
+                let (sp, _) = pb.sample_surface(&mut rng);
+                if prepared
+                    .iter()
+                    .enumerate()
+                    .any(|(o, q)| o != x && q.sdf_fast(sp) < 0.0)
+                {
+                    continue;
+                }
+                let nn = tree
+                    .query(&sp.to_array())
+                    .nearest_one::<kiddo::SquaredEuclidean<f32>>()
+                    .execute();
+                sum += (nn.distance.sqrt() - self.spacing).max(0.0) as f64;
+                count += 1;
+            }
+        }
+        if count == 0 { 0.0 } else { sum / count as f64 }
     }
 
     /// Bootstrap of a bone without points (§2.4.1: "rotated around the three axes until some

@@ -2,5 +2,6 @@
 
 pub mod bone;
 pub mod frames;
+pub mod pca;
 
 pub use bone::{Bone, Part, PreparedBone, Projection};

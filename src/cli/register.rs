@@ -1,0 +1,175 @@
+//! `pygmalion register`: FAKIR on a PLY file, with a progress line on a terminal, a one-line
+//! summary, the fitted skeleton as JSON and optionally the labelled cloud.
+
+use crate::anatomy::Template;
+use crate::cloud::ply::{WriteOptions, write_ply};
+use crate::error::{Error, Result};
+use crate::fakir::{Fit, Init, Registration, RegistrationOptions};
+use crate::math::Vec3;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::io::{IsTerminal, Write};
+use std::path::Path;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// Parses `x,y,z`.
+pub fn parse_vec3(s: &str, what: &str) -> Result<Vec3> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| Error::input(format!("invalid {what} '{s}': expected x,y,z")))?;
+    if v.len() != 3 || !v.iter().all(|x| x.is_finite()) {
+        return Err(Error::input(format!(
+            "invalid {what} '{s}': expected three finite numbers x,y,z"
+        )));
+    }
+    Ok(Vec3::new(v[0], v[1], v[2]))
+}
+
+/// Parses an axis: `x`, `-y`, `+z` or `x,y,z`.
+pub fn parse_axis(s: &str) -> Result<Vec3> {
+    let v = match s.trim().to_ascii_lowercase().as_str() {
+        "x" | "+x" => Vec3::X,
+        "-x" => -Vec3::X,
+        "y" | "+y" => Vec3::Y,
+        "-y" => -Vec3::Y,
+        "z" | "+z" => Vec3::Z,
+        "-z" => -Vec3::Z,
+        other => parse_vec3(other, "up axis")?,
+    };
+    if v.length() < 1e-9 {
+        return Err(Error::input("the up axis must not be zero"));
+    }
+    Ok(v.normalize())
+}
+
+/// What `FIT.json` holds.
+#[derive(Serialize)]
+pub struct FitReport {
+    pub template: String,
+    pub source: String,
+    pub joints: BTreeMap<String, [f32; 3]>,
+    pub bones: Vec<crate::anatomy::skeleton::BoneJson>,
+    pub root_rotation: [f32; 4],
+    pub block_scale: f32,
+    pub mean_distance: f64,
+    pub points: usize,
+    pub iterations: usize,
+    pub work_units: u64,
+    /// Points assigned to each bone.
+    pub assignment: BTreeMap<String, usize>,
+}
+
+impl FitReport {
+    /// The report of a fit.
+    pub fn new(fit: &Fit, source: &Path) -> Self {
+        let j = fit.skeleton.to_json();
+        let t = &fit.skeleton.template;
+        FitReport {
+            template: j.template,
+            source: source.display().to_string(),
+            joints: j.joints,
+            bones: j.bones,
+            root_rotation: fit.skeleton.root_rotation.to_array(),
+            block_scale: fit.skeleton.block_scale,
+            mean_distance: fit.mean_distance,
+            points: fit.labels.len(),
+            iterations: fit.iterations,
+            work_units: fit.units,
+            assignment: t
+                .bones
+                .iter()
+                .zip(&fit.bone_counts)
+                .map(|(b, c)| (b.name.clone(), *c))
+                .collect(),
+        }
+    }
+}
+
+/// Runs the command.
+pub fn run(
+    input: &Path,
+    template: &str,
+    anchor: Option<&str>,
+    up: Option<&str>,
+    out: Option<&Path>,
+    labels: Option<&Path>,
+    drop_non_finite: bool,
+) -> Result<()> {
+    let template = Arc::new(Template::resolve(template)?);
+    let cloud = super::read(input, drop_non_finite)?;
+    let up = up.map(parse_axis).transpose()?;
+    let init = match (anchor.map(|a| parse_vec3(a, "anchor")).transpose()?, up) {
+        (Some(anchor), up) => Init::Anchor { anchor, up },
+        (None, Some(up)) => Init::Up(up),
+        (None, None) => Init::Auto,
+    };
+    let cloud = Arc::new(cloud);
+    let opts = RegistrationOptions {
+        init,
+        ..Default::default()
+    };
+    let mut reg = Registration::new(cloud.clone(), template.clone(), opts)
+        .map_err(|e| Error::input(format!("{}: {e}", input.display())))?;
+    let start = Instant::now();
+    let tty = std::io::stderr().is_terminal();
+    while !reg.is_done() {
+        let p = reg.step(Duration::from_millis(100));
+        if tty && !p.done {
+            eprint!(
+                "\r{:<14} {:<10} iteration {} pass {} level {}  mean distance {:.5}  {:>8} units  {:5.1} s ",
+                p.activity.phase,
+                p.activity.chain.as_deref().unwrap_or(""),
+                p.activity.iteration,
+                p.activity.pass,
+                p.activity.level,
+                p.mean_distance,
+                p.units,
+                start.elapsed().as_secs_f64()
+            );
+            let _ = std::io::stderr().flush();
+        }
+    }
+    if tty {
+        eprintln!();
+    }
+    let fit = reg.take_result().expect("finished").map_err(|e| {
+        Error::input(format!(
+            "{}: cannot fit the '{}' template: {e}",
+            input.display(),
+            template.name
+        ))
+    })?;
+    let secs = start.elapsed().as_secs_f64();
+    if let Some(path) = out {
+        let text = serde_json::to_string_pretty(&FitReport::new(&fit, input))
+            .expect("fit report serialises");
+        std::fs::write(path, text).map_err(|e| Error::Io {
+            path: path.to_path_buf(),
+            source: e,
+        })?;
+    }
+    if let Some(path) = labels {
+        write_ply(
+            path,
+            &cloud,
+            &WriteOptions {
+                labels: Some(("bone".into(), fit.labels.clone())),
+                ..Default::default()
+            },
+        )?;
+    }
+    println!(
+        "{}: '{}' fitted to {} points in {} iterations, mean distance {:.6} ({:.3}% of the statue's size), {:.2} s",
+        input.display(),
+        template.name,
+        fit.labels.len(),
+        fit.iterations,
+        fit.mean_distance,
+        100.0 * fit.mean_distance / cloud.scale_estimate().max(1e-30) as f64,
+        secs
+    );
+    Ok(())
+}

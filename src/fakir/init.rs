@@ -1,0 +1,144 @@
+//! Initial placement of the template (thesis §2.4.2, §2.6.4).
+//!
+//! The papers need one click on the pelvis and note that the bounding-box centre fails on a
+//! lying figure (fig. 2.25). We do this automatically and for any template:
+//!
+//! 1. **Principal frames.** The template's rest pose is sampled on its envelope and both it and
+//!    the cloud get a PCA frame (centroid, axes by decreasing variance).
+//! 2. **Scale**: the ratio of the extents along the first principal axis (the body axis for a
+//!    standing human, the head–tail axis for a quadruped). With an up hint, the ratio of the
+//!    extents along the up axis (cloud) and the template's `+Y`.
+//! 3. **Candidate orientations**: every proper rotation taking the template's principal axes to
+//!    the cloud's, up to the sign of each axis and the order of the two minor axes (8
+//!    candidates); with an up hint, the template's up is sent to the hint and the facing
+//!    direction takes 8 headings about it.
+//! 4. **Placement**: the root goes where the template's root sits relative to its centroid,
+//!    mapped by the candidate and the scale, or at the given anchor.
+//! 5. **Choice**: a short registration (one whole-skeleton iteration on a small subsample)
+//!    from each candidate, scored two-sidedly: the mean distance of the points to the model
+//!    (eq. 2.16) plus the mean distance of the model's visible surface to the points
+//!    ([`super::solver::Solver::occupancy`]); the lowest score wins, ties to the earlier
+//!    candidate. The one-sided distance alone cannot tell a flipped skeleton whose bones
+//!    still cover the points from the right one; the flipped one leaves bone surface in
+//!    empty space.
+
+use crate::anatomy::{Skeleton, Template};
+use crate::geometry::pca::{Pca, pca};
+use crate::math::{Mat3, Quat, Vec3};
+use crate::rng::Rng;
+use std::sync::Arc;
+
+/// How to place the template before registration.
+#[derive(Clone, Debug, Default)]
+pub enum Init {
+    /// Fully automatic (see the module docs).
+    #[default]
+    Auto,
+    /// Automatic orientation, root at `anchor` (e.g. a tapped pelvis), optional up axis.
+    Anchor { anchor: Vec3, up: Option<Vec3> },
+    /// Automatic, with the statue's up axis known.
+    Up(Vec3),
+    /// Start from this skeleton as is.
+    Given(Skeleton),
+}
+
+/// A candidate placement.
+#[derive(Clone, Debug)]
+pub struct Candidate {
+    pub skeleton: Skeleton,
+    /// Template units → statue units.
+    pub scale: f32,
+}
+
+/// Rest-pose envelope samples of a template (deterministic).
+pub fn template_samples(t: &Arc<Template>, n: usize) -> Vec<Vec3> {
+    let rest = Skeleton::rest(t.clone()).pose();
+    let mut rng = Rng::new(0x5eed);
+    crate::synth::sample_envelope(&rest.bones, n, t.height, &mut rng).0
+}
+
+fn extent_along(points: &[Vec3], c: Vec3, axis: Vec3) -> f32 {
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for p in points {
+        let x = (*p - c).dot(axis);
+        lo = lo.min(x);
+        hi = hi.max(x);
+    }
+    (hi - lo).max(0.0)
+}
+
+/// The candidate placements for `points` (see the module docs).
+pub fn candidates(t: &Arc<Template>, points: &[Vec3], init: &Init) -> Vec<Candidate> {
+    let samples = template_samples(t, 4000);
+    let (Some(tp), Some(cp)) = (pca(&samples), pca(points)) else {
+        return Vec::new();
+    };
+    let root_rest = t.joints[t.root].rest;
+    let up_hint = match init {
+        Init::Up(u) => Some(*u),
+        Init::Anchor { up, .. } => *up,
+        _ => None,
+    };
+    let anchor = match init {
+        Init::Anchor { anchor, .. } => Some(*anchor),
+        _ => None,
+    };
+    let mut rotations: Vec<Quat> = Vec::new();
+    let scale;
+    match up_hint {
+        Some(up) if up.length() > 1e-9 => {
+            let up = up.normalize();
+            scale = extent_along(points, cp.centroid, up)
+                / extent_along(&samples, tp.centroid, Vec3::Y).max(1e-9);
+            let base = crate::geometry::frames::rotation_arc(Vec3::Y, up);
+            for k in 0..8 {
+                let heading = Quat::from_axis_angle(up, k as f32 * std::f32::consts::TAU / 8.0);
+                rotations.push((heading * base).normalize());
+            }
+        }
+        _ => {
+            scale = extent_along(points, cp.centroid, cp.axes[0])
+                / extent_along(&samples, tp.centroid, tp.axes[0]).max(1e-9);
+            rotations = frame_alignments(&tp, &cp);
+        }
+    }
+    rotations
+        .into_iter()
+        .map(|q| {
+            let root = match anchor {
+                Some(a) => a,
+                None => cp.centroid + q * ((root_rest - tp.centroid) * scale),
+            };
+            Candidate {
+                skeleton: Skeleton::rest_placed(t.clone(), root, q, scale),
+                scale,
+            }
+        })
+        .collect()
+}
+
+/// Proper rotations sending the template's principal axes onto the cloud's, for each sign
+/// choice and both orders of the minor axes.
+fn frame_alignments(tp: &Pca, cp: &Pca) -> Vec<Quat> {
+    let t = Mat3::from_cols(tp.axes[0], tp.axes[1], tp.axes[2]);
+    let mut out = Vec::new();
+    for swap in [false, true] {
+        let (c1, c2) = if swap {
+            (cp.axes[2], cp.axes[1])
+        } else {
+            (cp.axes[1], cp.axes[2])
+        };
+        for s0 in [1.0f32, -1.0] {
+            for s1 in [1.0f32, -1.0] {
+                let a0 = s0 * cp.axes[0];
+                let a1 = s1 * c1;
+                let a2 = a0.cross(a1);
+                let _ = c2;
+                let c = Mat3::from_cols(a0, a1, a2);
+                let r = c * t.transpose();
+                out.push(Quat::from_mat3(&r).normalize());
+            }
+        }
+    }
+    out
+}

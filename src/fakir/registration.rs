@@ -1,0 +1,456 @@
+//! The resumable registration: [`Registration::new`], [`Registration::step`] with a time
+//! budget, [`Registration::run_to_convergence`].
+//!
+//! ## Levels
+//! 1. **Initialisation** ([`super::init`]): candidate placements, each tried with a short
+//!    registration on a small subsample; the best is kept.
+//! 2. **Level 0**: the whole-skeleton schedule ([`super::schedule`]) on a random subsample
+//!    (`subsample` points, default 8000) until convergence.
+//! 3. **Level 1** (clouds larger than the subsample): the assignment is redone on all points
+//!    and the schedule refines the skeleton (`final_iterations` whole-skeleton iterations).
+//!
+//! ## Incremental by design
+//! The algorithm is written as plain sequential code whose elementary steps (one LM iteration
+//! of one bone or pair, one slice of an assignment refresh) are **work units**; after each one
+//! the solver calls a [`Pause`] hook. [`Registration::step`] runs the algorithm on a worker
+//! thread that stops at the first unit boundary after the budget is spent and waits there for
+//! the next `step`; [`Registration::run_to_convergence`] runs it with a hook that never
+//! pauses. Pausing never changes what is computed, and every parallel reduction sums
+//! fixed-size chunks in a fixed order, so any sequence of budgets gives exactly the same
+//! skeleton, bit for bit, as an uninterrupted run on any number of threads.
+
+use super::assign::{AssignParams, Assignment};
+use super::init::{Candidate, Init, candidates};
+use super::schedule::{ScheduleSettings, register_skeleton};
+use super::solver::{Activity, Cancelled, NoPause, Pause, Solver, SolverSettings, template_extent};
+use super::world::WorldSkeleton;
+use crate::anatomy::{Skeleton, Template};
+use crate::cloud::PointCloud;
+use crate::cloud::normals::{NormalOptions, estimate_normals};
+use crate::error::{Error, Result};
+use crate::math::Vec3;
+use crate::rng::Rng;
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// Options of a registration.
+#[derive(Clone, Debug)]
+pub struct RegistrationOptions {
+    pub init: Init,
+    /// Points of level 0 (random subsample).
+    pub subsample: usize,
+    /// Points of each candidate's short registration.
+    pub init_subsample: usize,
+    /// Whole-skeleton iterations at level 1.
+    pub final_iterations: usize,
+    /// Seed of the subsampling.
+    pub seed: u64,
+    pub solver: SolverSettings,
+    pub schedule: ScheduleSettings,
+    /// Cone preference slack (relative).
+    pub cone_slack: f32,
+    /// Cone preference slack (fraction of the statue's size).
+    pub cone_abs: f32,
+}
+
+impl Default for RegistrationOptions {
+    fn default() -> Self {
+        RegistrationOptions {
+            init: Init::Auto,
+            subsample: 8000,
+            init_subsample: 1500,
+            final_iterations: 1,
+            seed: 7,
+            solver: SolverSettings::default(),
+            schedule: ScheduleSettings::default(),
+            cone_slack: 0.2,
+            cone_abs: 0.002,
+        }
+    }
+}
+
+/// Progress of a registration.
+#[derive(Clone, Debug, Default)]
+pub struct Progress {
+    pub activity: Activity,
+    /// Work units done so far.
+    pub units: u64,
+    /// Mean distance (eq. 2.16) over the points of the current level.
+    pub mean_distance: f64,
+    /// Current skeleton.
+    pub skeleton: Option<Skeleton>,
+    /// Finished (successfully or not).
+    pub done: bool,
+}
+
+/// The result of a registration.
+#[derive(Clone, Debug)]
+pub struct Fit {
+    pub skeleton: Skeleton,
+    /// Bone of every point of the cloud.
+    pub labels: Vec<u32>,
+    /// Mean distance of all points to their bones (thesis eq. 2.16).
+    pub mean_distance: f64,
+    /// Points per bone.
+    pub bone_counts: Vec<usize>,
+    /// Whole-skeleton iterations (level 0 + level 1).
+    pub iterations: usize,
+    /// Work units.
+    pub units: u64,
+    /// Index of the initial candidate kept.
+    pub candidate: usize,
+    /// Two-sided score (mean distance + occupancy) of each candidate's short registration.
+    pub candidate_distances: Vec<f64>,
+}
+
+/// Checks a cloud for registration and returns its normals (estimated when absent).
+fn prepare(cloud: &PointCloud, template: &Template) -> Result<Vec<Vec3>> {
+    let min_points = 20 * template.bones.len();
+    if cloud.len() < min_points {
+        return Err(Error::input(format!(
+            "too few points to fit the '{}' template: {} (at least {min_points} needed)",
+            template.name,
+            cloud.len()
+        )));
+    }
+    if let Some(i) = cloud.positions.iter().position(|p| !p.is_finite()) {
+        return Err(Error::input(format!(
+            "point {i} has a non-finite coordinate"
+        )));
+    }
+    let bb = cloud.bounding_box().expect("non-empty");
+    let size = bb.size();
+    if !(size.max_element() > 0.0) {
+        return Err(Error::input("degenerate cloud: all points coincide"));
+    }
+    let mut sorted = [size.x, size.y, size.z];
+    sorted.sort_by(f32::total_cmp);
+    if sorted[1] <= 1e-6 * sorted[2] {
+        return Err(Error::input("degenerate cloud: the points lie on a line"));
+    }
+    match &cloud.normals {
+        Some(n) if n.len() == cloud.len() => Ok(n.clone()),
+        _ => estimate_normals(&cloud.positions, &NormalOptions::default()),
+    }
+}
+
+/// `k` distinct indices out of `n`, sorted (all of them when `k ≥ n`).
+fn subsample(n: usize, k: usize, seed: u64) -> Vec<u32> {
+    if k >= n {
+        return (0..n as u32).collect();
+    }
+    let mut idx: Vec<u32> = (0..n as u32).collect();
+    let mut rng = Rng::new(seed);
+    for i in 0..k {
+        let j = i + rng.below(n - i);
+        idx.swap(i, j);
+    }
+    let mut out = idx[..k].to_vec();
+    out.sort_unstable();
+    out
+}
+
+fn assignment_of(
+    positions: &[Vec3],
+    normals: &[Vec3],
+    idx: &[u32],
+    n_bones: usize,
+    params: AssignParams,
+) -> Assignment {
+    Assignment::new(
+        idx.iter().map(|&i| positions[i as usize]).collect(),
+        idx.iter().map(|&i| normals[i as usize]).collect(),
+        idx.to_vec(),
+        n_bones,
+        params,
+    )
+}
+
+/// The registration algorithm, run to the end with the pause hook `pause`.
+pub fn register(
+    cloud: &PointCloud,
+    template: Arc<Template>,
+    opts: &RegistrationOptions,
+    pause: &mut dyn Pause,
+) -> Result<Fit> {
+    let normals = prepare(cloud, &template)?;
+    let positions = &cloud.positions;
+    let n = positions.len();
+    let nb = template.bones.len();
+    let level0 = subsample(n, opts.subsample, opts.seed);
+    let level0_points: Vec<Vec3> = level0.iter().map(|&i| positions[i as usize]).collect();
+    // Candidates.
+    let cands: Vec<Candidate> = match &opts.init {
+        Init::Given(s) => {
+            let scale = s.block_scale;
+            vec![Candidate {
+                skeleton: s.clone(),
+                scale,
+            }]
+        }
+        init => candidates(&template, &level0_points, init),
+    };
+    if cands.is_empty() {
+        return Err(Error::input("cannot place the template on this cloud"));
+    }
+    let scale = cands[0].scale;
+    let size = scale * template_extent(&template);
+    let params = AssignParams {
+        cone_slack: opts.cone_slack,
+        cone_abs: opts.cone_abs * size,
+    };
+    let free_root = template.block_bones().next().is_none();
+    let mut distances = Vec::new();
+    let mut chosen = 0;
+    if cands.len() > 1 {
+        let idx = subsample(n, opts.init_subsample, opts.seed ^ 0x9e37);
+        let quick = ScheduleSettings {
+            max_passes: 1,
+            max_iterations: 1,
+            ..opts.schedule.clone()
+        };
+        let quick_solver = SolverSettings {
+            lm_iterations: 3,
+            one_bone_rounds: 2,
+            two_bone_rounds: 1,
+            ..opts.solver.clone()
+        };
+        for c in &cands {
+            let a = assignment_of(positions, &normals, &idx, nb, params);
+            let mut s = Solver::new(
+                WorldSkeleton::from_skeleton(&c.skeleton),
+                a,
+                c.scale,
+                quick_solver.clone(),
+                pause,
+            );
+            s.free_root = free_root;
+            s.activity.phase = "initialisation";
+            register_skeleton(&mut s, &quick, true).map_err(cancelled)?;
+            distances.push(s.mean_distance() + s.occupancy());
+        }
+        for (i, d) in distances.iter().enumerate() {
+            if *d < distances[chosen] {
+                chosen = i;
+            }
+        }
+    }
+    let start = &cands[chosen];
+    // Level 0.
+    let a0 = assignment_of(positions, &normals, &level0, nb, params);
+    let mut s = Solver::new(
+        WorldSkeleton::from_skeleton(&start.skeleton),
+        a0,
+        start.scale,
+        opts.solver.clone(),
+        pause,
+    );
+    s.free_root = free_root;
+    let fresh = true;
+    let mut iterations = register_skeleton(&mut s, &opts.schedule, fresh).map_err(cancelled)?;
+    // Level 1: all points.
+    if level0.len() < n {
+        s.activity.level = 1;
+        let all: Vec<u32> = (0..n as u32).collect();
+        s.set_assignment(assignment_of(positions, &normals, &all, nb, params));
+        let fine = ScheduleSettings {
+            max_iterations: opts.final_iterations,
+            ..opts.schedule.clone()
+        };
+        iterations += register_skeleton(&mut s, &fine, false).map_err(cancelled)?;
+    }
+    s.refresh().map_err(cancelled)?;
+    s.activity.phase = "done";
+    let mut labels = vec![0u32; n];
+    for (k, &src) in s.assignment.source.iter().enumerate() {
+        labels[src as usize] = s.assignment.label[k];
+    }
+    let mut bone_counts = vec![0usize; nb];
+    for &l in &labels {
+        bone_counts[l as usize] += 1;
+    }
+    Ok(Fit {
+        skeleton: s.world.to_skeleton(),
+        labels,
+        mean_distance: s.mean_distance(),
+        bone_counts,
+        iterations,
+        units: s.units,
+        candidate: chosen,
+        candidate_distances: distances,
+    })
+}
+
+fn cancelled(_: Cancelled) -> Error {
+    Error::input("registration cancelled")
+}
+
+enum Cmd {
+    Run(Instant),
+    Cancel,
+}
+
+enum Msg {
+    Paused,
+    Finished(Box<Result<Fit>>),
+}
+
+/// Pause hook of the worker thread: publishes progress and waits at the deadline.
+struct ChannelPause {
+    deadline: Instant,
+    cmds: Receiver<Cmd>,
+    msgs: Sender<Msg>,
+    progress: Arc<Mutex<Progress>>,
+    units: u64,
+}
+
+impl Pause for ChannelPause {
+    fn unit(&mut self, s: &Solver) -> Result<(), Cancelled> {
+        self.units += 1;
+        if let Ok(mut p) = self.progress.lock() {
+            p.activity = s.activity.clone();
+            p.units = self.units;
+            p.mean_distance = s.mean_distance();
+            p.skeleton = Some(s.world.to_skeleton());
+        }
+        if Instant::now() >= self.deadline {
+            if self.msgs.send(Msg::Paused).is_err() {
+                return Err(Cancelled);
+            }
+            match self.cmds.recv() {
+                Ok(Cmd::Run(deadline)) => self.deadline = deadline,
+                Ok(Cmd::Cancel) | Err(_) => return Err(Cancelled),
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A registration that can run in bounded steps (see the module docs).
+pub struct Registration {
+    cloud: Arc<PointCloud>,
+    template: Arc<Template>,
+    opts: RegistrationOptions,
+    worker: Option<(Sender<Cmd>, Receiver<Msg>, JoinHandle<()>)>,
+    progress: Arc<Mutex<Progress>>,
+    result: Option<Result<Fit>>,
+}
+
+impl Registration {
+    /// Prepares a registration (validates the cloud; nothing runs yet).
+    pub fn new(
+        cloud: Arc<PointCloud>,
+        template: Arc<Template>,
+        opts: RegistrationOptions,
+    ) -> Result<Self> {
+        let min_points = 20 * template.bones.len();
+        if cloud.len() < min_points {
+            return Err(Error::input(format!(
+                "too few points to fit the '{}' template: {} (at least {min_points} needed)",
+                template.name,
+                cloud.len()
+            )));
+        }
+        Ok(Registration {
+            cloud,
+            template,
+            opts,
+            worker: None,
+            progress: Arc::default(),
+            result: None,
+        })
+    }
+
+    /// Runs work units until `budget` is spent (at least one unit), then returns the progress.
+    pub fn step(&mut self, budget: Duration) -> Progress {
+        if self.result.is_some() {
+            return self.progress();
+        }
+        let deadline = Instant::now() + budget;
+        if self.worker.is_none() {
+            let (cmd_tx, cmd_rx) = channel();
+            let (msg_tx, msg_rx) = channel();
+            let (cloud, template, opts, progress) = (
+                self.cloud.clone(),
+                self.template.clone(),
+                self.opts.clone(),
+                self.progress.clone(),
+            );
+            let handle = std::thread::spawn(move || {
+                let mut pause = ChannelPause {
+                    deadline,
+                    cmds: cmd_rx,
+                    msgs: msg_tx.clone(),
+                    progress,
+                    units: 0,
+                };
+                let r = register(&cloud, template, &opts, &mut pause);
+                let _ = msg_tx.send(Msg::Finished(Box::new(r)));
+            });
+            self.worker = Some((cmd_tx, msg_rx, handle));
+        } else if let Some((tx, _, _)) = &self.worker {
+            let _ = tx.send(Cmd::Run(deadline));
+        }
+        let msg = self.worker.as_ref().map(|(_, rx, _)| rx.recv());
+        match msg {
+            Some(Ok(Msg::Paused)) => {}
+            Some(Ok(Msg::Finished(r))) => self.finish(*r),
+            Some(Err(_)) | None => self.finish(Err(Error::input(
+                "the registration worker stopped unexpectedly",
+            ))),
+        }
+        self.progress()
+    }
+
+    fn finish(&mut self, r: Result<Fit>) {
+        if let Ok(mut p) = self.progress.lock() {
+            p.done = true;
+            if let Ok(fit) = &r {
+                p.skeleton = Some(fit.skeleton.clone());
+                p.mean_distance = fit.mean_distance;
+                p.activity.phase = "done";
+            }
+        }
+        if let Some((_, _, h)) = self.worker.take() {
+            let _ = h.join();
+        }
+        self.result = Some(r);
+    }
+
+    /// The latest progress.
+    pub fn progress(&self) -> Progress {
+        self.progress.lock().map(|p| p.clone()).unwrap_or_default()
+    }
+
+    /// True when finished.
+    pub fn is_done(&self) -> bool {
+        self.result.is_some()
+    }
+
+    /// The result, once finished.
+    pub fn result(&self) -> Option<&Result<Fit>> {
+        self.result.as_ref()
+    }
+
+    /// Takes the result, once finished.
+    pub fn take_result(&mut self) -> Option<Result<Fit>> {
+        self.result.take()
+    }
+
+    /// Runs the whole registration on the calling thread (no pauses).
+    pub fn run_to_convergence(self) -> Result<Fit> {
+        register(&self.cloud, self.template.clone(), &self.opts, &mut NoPause)
+    }
+}
+
+impl Drop for Registration {
+    fn drop(&mut self) {
+        if let Some((tx, rx, h)) = self.worker.take() {
+            let _ = tx.send(Cmd::Cancel);
+            drop(rx);
+            let _ = h.join();
+        }
+    }
+}
