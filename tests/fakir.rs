@@ -409,3 +409,69 @@ fn registration_rejects_clouds_it_cannot_fit() {
     .run_to_convergence();
     assert!(r.err().expect("NaN").to_string().contains("non-finite"));
 }
+
+#[test]
+fn incremental_culled_assignment_equals_a_full_recomputation() {
+    use pygmalion::fakir::lm::{Param, apply};
+    use pygmalion::fakir::world::RadiusClasses;
+    use pygmalion::rng::Rng;
+    let s = small_human(21, 4_000, true);
+    let t = s.truth.template.clone();
+    let classes = RadiusClasses::new(&t);
+    let mut w = WorldSkeleton::from_skeleton(&s.truth);
+    let n = s.cloud.len();
+    let params = AssignParams {
+        cone_slack: 0.2,
+        cone_abs: 0.003,
+    };
+    let mk = || {
+        Assignment::new(
+            s.cloud.positions.clone(),
+            s.cloud.normals.clone().unwrap(),
+            (0..n as u32).collect(),
+            t.bones.len(),
+            params,
+        )
+    };
+    let mut incremental = mk();
+    let all: Vec<usize> = (0..t.bones.len()).collect();
+    let prepared = |w: &WorldSkeleton| w.bones().iter().map(|b| b.prepare()).collect::<Vec<_>>();
+    incremental.refresh(&prepared(&w), &all);
+    let mut rng = Rng::new(3);
+    for step in 0..40 {
+        // Move one bone (its subtree follows) and refresh only the bones that moved.
+        let b = rng.below(t.bones.len());
+        let before = w.bones();
+        let axis = w.frames[b] * Vec3::Y;
+        apply(
+            &mut w,
+            &classes,
+            &Param::Swing { bone: b, axis },
+            rng.range(-0.6, 0.6),
+        );
+        apply(
+            &mut w,
+            &classes,
+            &Param::Length { bone: b },
+            rng.range(-0.05, 0.05),
+        );
+        let after = w.bones();
+        let moved: Vec<usize> = (0..after.len())
+            .filter(|&x| after[x] != before[x])
+            .collect();
+        incremental.refresh(&prepared(&w), &moved);
+        let mut full = mk();
+        full.refresh(&prepared(&w), &all);
+        assert_eq!(
+            incremental.label, full.label,
+            "labels differ after step {step}"
+        );
+        for i in 0..n {
+            assert_eq!(
+                incremental.own_distance(i),
+                full.own_distance(i),
+                "own distance of point {i}, step {step}"
+            );
+        }
+    }
+}

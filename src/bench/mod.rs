@@ -13,6 +13,7 @@
 //! `min_s`, `max_s`, plus benchmark-specific figures in `extra`.
 
 mod core;
+mod fakir;
 
 use crate::error::Result;
 use serde::Serialize;
@@ -43,7 +44,9 @@ pub struct Entry {
 
 /// Every benchmark, in a stable order.
 pub fn entries() -> Vec<Entry> {
-    core::entries()
+    let mut e = core::entries();
+    e.extend(fakir::entries());
+    e
 }
 
 /// Times `body` once for warm-up and then `runs` times; `n` is the problem size.

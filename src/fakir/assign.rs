@@ -8,10 +8,14 @@
 //! **Choice:** "similar" means `d_cone ≤ (1 + cone_slack) · d_best + cone_abs`, with
 //! `cone_slack = 0.2` and `cone_abs = 0.002 ×` the statue's height by default.
 //!
-//! The assignment keeps the distance of every point to every bone (one column of `f32` per
-//! bone, structure of arrays) and the part each projection falls on, so after a parameter
-//! change only the columns of the bones that moved are recomputed, then the argmin is redone
-//! ([`Assignment::refresh`]). Work is split by point ranges so the registration can bound each
+//! The assignment keeps the distance of every point to every bone (one contiguous row of
+//! `f32` per point) and whether each projection falls on a cone part, so after a parameter
+//! change only the distances to the bones that moved are recomputed, then the argmin is
+//! redone ([`Assignment::refresh`]). **Culling** (exact): a moved bone is only projected on
+//! when a lower bound of its distance — the distance from the point to the bone's bounding
+//! sphere — could beat the point's best distance among the bones that did not move (with the
+//! cone-preference slack); otherwise that lower bound is stored, which cannot change the
+//! argmin. Work is split by point ranges so the registration can bound each
 //! work unit; every loop over points is a rayon loop over fixed-size chunks and writes only its
 //! own slots, so results do not depend on the thread count.
 
@@ -41,10 +45,13 @@ pub struct Assignment {
     /// Indices of these points in the full cloud.
     pub source: Vec<u32>,
     n_bones: usize,
-    /// `dist[b * n + i]`: constrained distance of point `i` to bone `b`.
+    /// `dist[i * n_bones + b]`: constrained distance of point `i` to bone `b` (or a lower
+    /// bound of it when the bone cannot be the point's nearest).
     dist: Vec<f32>,
-    /// `cone[b * n + i]`: whether that projection lies on the cone part.
+    /// `cone[i * n_bones + b]`: whether that projection lies on the cone part.
     cone: Vec<bool>,
+    /// `bound[i * n_bones + b]`: the stored distance is only a lower bound.
+    bound: Vec<bool>,
     /// Bone of each point.
     pub label: Vec<u32>,
     /// Bones that may receive points (others are ignored by the argmin).
@@ -70,6 +77,7 @@ impl Assignment {
             n_bones,
             dist: vec![f32::INFINITY; n * n_bones],
             cone: vec![false; n * n_bones],
+            bound: vec![false; n * n_bones],
             label: vec![0; n],
             enabled: vec![true; n_bones],
             params,
@@ -91,36 +99,90 @@ impl Assignment {
         self.n_bones
     }
 
-    /// Recomputes the distance columns of `bones_to_update` for the points in `range`.
+    /// Recomputes the distances to `bones_to_update` for the points in `range` (with the
+    /// culling described in the module docs).
     pub fn update_columns(
         &mut self,
         bones: &[PreparedBone],
         bones_to_update: &[usize],
         range: std::ops::Range<usize>,
     ) {
-        let n = self.len();
+        let nb = self.n_bones;
+        let mut moved = vec![false; nb];
         for &b in bones_to_update {
-            let pb = &bones[b];
-            let dist = &mut self.dist[b * n + range.start..b * n + range.end];
-            let cone = &mut self.cone[b * n + range.start..b * n + range.end];
-            let pos = &self.positions[range.clone()];
-            let nrm = &self.normals[range.clone()];
-            dist.par_chunks_mut(CHUNK)
-                .zip(cone.par_chunks_mut(CHUNK))
-                .zip(pos.par_chunks(CHUNK).zip(nrm.par_chunks(CHUNK)))
-                .for_each(|((d, c), (p, nn))| {
-                    for k in 0..d.len() {
-                        let proj = pb.project_constrained(p[k], nn[k]);
-                        d[k] = proj.distance;
-                        c[k] = proj.part == Part::Cone && proj.on_surface;
-                    }
-                });
+            moved[b] = true;
         }
+        // Bounding spheres of the moved bones.
+        let spheres: Vec<(usize, Vec3, f32)> = bones_to_update
+            .iter()
+            .map(|&b| {
+                let bone = &bones[b].bone;
+                let c = 0.5 * (bone.c1 + bone.c2);
+                (b, c, 0.5 * bone.length() + bone.r1.max(bone.r2))
+            })
+            .collect();
+        let enabled = &self.enabled;
+        let AssignParams {
+            cone_slack,
+            cone_abs,
+        } = self.params;
+        let pos = &self.positions[range.clone()];
+        let nrm = &self.normals[range.clone()];
+        let dist = &mut self.dist[range.start * nb..range.end * nb];
+        let cone = &mut self.cone[range.start * nb..range.end * nb];
+        let bound = &mut self.bound[range.start * nb..range.end * nb];
+        dist.par_chunks_mut(CHUNK * nb)
+            .zip(cone.par_chunks_mut(CHUNK * nb))
+            .zip(bound.par_chunks_mut(CHUNK * nb))
+            .zip(pos.par_chunks(CHUNK).zip(nrm.par_chunks(CHUNK)))
+            .for_each(|(((d, c), bd), (p, nn))| {
+                for k in 0..p.len() {
+                    let row = &mut d[k * nb..(k + 1) * nb];
+                    let crow = &mut c[k * nb..(k + 1) * nb];
+                    let brow = &mut bd[k * nb..(k + 1) * nb];
+                    let mut best_unmoved = f32::INFINITY;
+                    for b in 0..nb {
+                        if !moved[b] && enabled[b] && row[b] < best_unmoved {
+                            best_unmoved = row[b];
+                        }
+                    }
+                    let bound = (1.0 + cone_slack) * best_unmoved + cone_abs;
+                    for &(b, centre, radius) in &spheres {
+                        let lower = ((p[k] - centre).length() - radius).max(0.0);
+                        if lower > bound {
+                            row[b] = lower;
+                            crow[b] = false;
+                            brow[b] = true;
+                        } else {
+                            let proj = bones[b].project_constrained(p[k], nn[k]);
+                            row[b] = proj.distance;
+                            crow[b] = proj.part == Part::Cone && proj.on_surface;
+                            brow[b] = false;
+                        }
+                    }
+                    // Every entry inside the argmin's preference window must be exact (a bound
+                    // stored earlier may have become competitive when its rival moved away).
+                    loop {
+                        let best = (0..nb)
+                            .filter(|&b| enabled[b])
+                            .map(|b| row[b])
+                            .fold(f32::INFINITY, f32::min);
+                        let limit = (1.0 + cone_slack) * best + cone_abs;
+                        let Some(b) = (0..nb).find(|&b| enabled[b] && brow[b] && row[b] <= limit)
+                        else {
+                            break;
+                        };
+                        let proj = bones[b].project_constrained(p[k], nn[k]);
+                        row[b] = proj.distance;
+                        crow[b] = proj.part == Part::Cone && proj.on_surface;
+                        brow[b] = false;
+                    }
+                }
+            });
     }
 
     /// Redoes the argmin (with the cone preference) for the points in `range`.
     pub fn relabel(&mut self, range: std::ops::Range<usize>) {
-        let n = self.len();
         let nb = self.n_bones;
         let dist = &self.dist;
         let cone = &self.cone;
@@ -136,24 +198,24 @@ impl Assignment {
             .for_each(|(ci, labels)| {
                 for (k, l) in labels.iter_mut().enumerate() {
                     let i = start + ci * CHUNK + k;
+                    let row = &dist[i * nb..(i + 1) * nb];
+                    let crow = &cone[i * nb..(i + 1) * nb];
                     let mut best = u32::MAX;
                     let mut best_d = f32::INFINITY;
                     for b in 0..nb {
-                        let d = dist[b * n + i];
-                        if enabled[b] && d < best_d {
-                            best_d = d;
+                        if enabled[b] && row[b] < best_d {
+                            best_d = row[b];
                             best = b as u32;
                         }
                     }
-                    if best != u32::MAX && !cone[best as usize * n + i] {
+                    if best != u32::MAX && !crow[best as usize] {
                         // Prefer a cone part with a similar distance.
                         let limit = (1.0 + cone_slack) * best_d + cone_abs;
                         let mut alt = u32::MAX;
                         let mut alt_d = f32::INFINITY;
                         for b in 0..nb {
-                            let d = dist[b * n + i];
-                            if enabled[b] && cone[b * n + i] && d <= limit && d < alt_d {
-                                alt_d = d;
+                            if enabled[b] && crow[b] && row[b] <= limit && row[b] < alt_d {
+                                alt_d = row[b];
                                 alt = b as u32;
                             }
                         }
@@ -175,12 +237,12 @@ impl Assignment {
 
     /// Distance of point `i` to bone `b` (as last computed).
     pub fn distance(&self, b: usize, i: usize) -> f32 {
-        self.dist[b * self.len() + i]
+        self.dist[i * self.n_bones + b]
     }
 
     /// Distance of point `i` to its assigned bone.
     pub fn own_distance(&self, i: usize) -> f32 {
-        self.dist[self.label[i] as usize * self.len() + i]
+        self.dist[i * self.n_bones + self.label[i] as usize]
     }
 
     /// Indices of the points assigned to each bone, in increasing order.

@@ -1,0 +1,116 @@
+//! Benchmarks of FAKIR registration on synthetic statues (automatic initialisation for the
+//! human; the papers' setting — a straight generic chain anchored at the true extremity — for
+//! the chain). Each result also reports the fit's accuracy in `extra`.
+
+use super::{BenchResult, Entry, time_it};
+use crate::anatomy::{Skeleton, Template};
+use crate::error::Result;
+use crate::fakir::{Fit, Init, Registration, RegistrationOptions};
+use crate::math::Quat;
+use crate::synth::{SynthOptions, SynthStatue, chain4, generate};
+use std::sync::Arc;
+
+pub(super) fn entries() -> Vec<Entry> {
+    vec![
+        Entry {
+            name: "fakir/chain4_5k",
+            run: chain4_5k,
+        },
+        Entry {
+            name: "fakir/human_10k",
+            run: human_10k,
+        },
+        Entry {
+            name: "fakir/human_140k",
+            run: human_140k,
+        },
+    ]
+}
+
+/// Mean joint error as a fraction of `height`.
+fn joint_error(fit: &Skeleton, truth: &Skeleton, height: f32) -> f64 {
+    let (a, b) = (fit.pose().joints, truth.pose().joints);
+    a.iter()
+        .zip(&b)
+        .map(|(x, y)| (*x - *y).length() as f64)
+        .sum::<f64>()
+        / a.len() as f64
+        / height as f64
+}
+
+fn run_case(
+    name: &str,
+    statue: &SynthStatue,
+    opts: RegistrationOptions,
+    height: f32,
+    runs: usize,
+) -> Result<BenchResult> {
+    let cloud = Arc::new(statue.cloud.clone());
+    let t = statue.truth.template.clone();
+    let mut last: Option<Result<Fit>> = None;
+    let mut r = time_it(name, cloud.len() as u64, runs, || {
+        last = Some(
+            Registration::new(cloud.clone(), t.clone(), opts.clone())
+                .and_then(|reg| reg.run_to_convergence()),
+        );
+    });
+    let fit = last.expect("ran at least once")?;
+    r.extra.insert("mean_distance".into(), fit.mean_distance);
+    r.extra.insert(
+        "joint_error_pct".into(),
+        100.0 * joint_error(&fit.skeleton, &statue.truth, height),
+    );
+    r.extra.insert("iterations".into(), fit.iterations as f64);
+    r.extra.insert("work_units".into(), fit.units as f64);
+    Ok(r)
+}
+
+fn chain4_5k(runs: usize) -> Result<BenchResult> {
+    let s = chain4(5_000, 1, 0.0, 0.0, vec![])?;
+    let mut init = Skeleton::rest(s.truth.template.clone());
+    for b in &mut init.bones {
+        b.length = 35.0;
+        b.r1 = 7.0;
+        b.r2 = 7.0;
+    }
+    init.root_rotation = Quat::from_rotation_z(0.9);
+    let opts = RegistrationOptions {
+        init: Init::Given(init),
+        ..Default::default()
+    };
+    run_case("fakir/chain4_5k", &s, opts, 140.0, runs)
+}
+
+fn human(points: usize) -> Result<SynthStatue> {
+    let t = Arc::new(Template::builtin("human")?);
+    generate(
+        t,
+        &SynthOptions {
+            points,
+            seed: 1,
+            rigid: true,
+            height: 1.7,
+            ..Default::default()
+        },
+    )
+}
+
+fn human_10k(runs: usize) -> Result<BenchResult> {
+    run_case(
+        "fakir/human_10k",
+        &human(10_000)?,
+        RegistrationOptions::default(),
+        1.7,
+        runs,
+    )
+}
+
+fn human_140k(runs: usize) -> Result<BenchResult> {
+    run_case(
+        "fakir/human_140k",
+        &human(140_000)?,
+        RegistrationOptions::default(),
+        1.7,
+        runs.min(3),
+    )
+}
