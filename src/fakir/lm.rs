@@ -21,7 +21,8 @@
 //! step ([`Limits`]): lengths stay within `[0.2, 3.5] ×` the template's (scaled) length and the
 //! ratio of consecutive chain bones within `4 ×` of the template's ratio either way, radii
 //! within `[0.03, 1.5] ×` the template's, and `|r2 − r1| ≤ 0.9 l` so no sphere swallows its
-//! neighbour. The energy is evaluated after clamping, so a clamped step is only accepted when
+//! neighbour; the root block's scale stays within `[0.6, 1.6] ×` the initial estimate. The
+//! energy is evaluated after clamping, so a clamped step is only accepted when
 //! it still lowers the energy.
 
 use super::assign::{Assignment, CHUNK};
@@ -142,12 +143,14 @@ pub struct Limits {
     pub max_r: Vec<[f32; 2]>,
     /// Template length ratio of each bone to its chain predecessor (None for chain heads).
     pub prev_ratio: Vec<Option<(usize, f32)>>,
+    /// Bounds of the root block's scale.
+    pub block_scale: (f32, f32),
 }
 
 impl Limits {
     /// Loose bounds for a template scaled by `scale` (template units → statue units).
     pub fn new(w: &WorldSkeleton, scale: f32) -> Self {
-        Self::with_length_range(w, scale, 0.2, 3.5)
+        Self::with_length_range(w, scale, 0.5, 2.0)
     }
 
     /// Bounds with lengths within `[lo, hi] ×` the scaled template lengths.
@@ -160,12 +163,13 @@ impl Limits {
             min_r: vec![[0.0; 2]; n],
             max_r: vec![[f32::INFINITY; 2]; n],
             prev_ratio: vec![None; n],
+            block_scale: (0.6 * scale, 1.6 * scale),
         };
         for (i, def) in t.bones.iter().enumerate() {
             let rest = w.rest_length(i) * scale;
             l.min_len[i] = lo * rest;
             l.max_len[i] = hi * rest;
-            l.min_r[i] = [0.03 * def.r1 * scale, 0.03 * def.r2 * scale];
+            l.min_r[i] = [0.3 * def.r1 * scale, 0.3 * def.r2 * scale];
             l.max_r[i] = [1.5 * def.r1 * scale, 1.5 * def.r2 * scale];
             if let Some((c, pos)) = def.chain {
                 if pos > 0 {
@@ -180,6 +184,10 @@ impl Limits {
     /// Clamps the lengths and radii of `bones` (and what shares their radii).
     pub fn clamp(&self, w: &mut WorldSkeleton, classes: &RadiusClasses, bones: &[usize]) {
         let t = w.template.clone();
+        let k = w.block_scale.clamp(self.block_scale.0, self.block_scale.1) / w.block_scale;
+        if k != 1.0 && k.is_finite() {
+            w.scale_block(k);
+        }
         for &b in bones {
             if t.bones[b].kind != BoneKind::Free {
                 continue;

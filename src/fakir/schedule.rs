@@ -2,9 +2,7 @@
 //! with backtracking (§2.4.2).
 //!
 //! ## A chain (Algorithm 1)
-//! 1. *Initial forward pass*: a coarse direction search
-//!    ([`super::solver::Solver::search_direction`]) then the one-bone fit of the first bone
-//!    (rotation, both radii, length);
+//! 1. *Initial forward pass*: one-bone fit of the first bone (rotation, both radii, length);
 //!    then for each next bone, a one-bone fit (rotation about the shared joint, length, free
 //!    radius) followed by the two-bone fit of the joint it shares with its predecessor; the last
 //!    bone's length and free radius come from its one-bone fit.
@@ -55,18 +53,12 @@ impl Default for ScheduleSettings {
 }
 
 /// Algorithm 1, lines 1–10: the initial forward pass over `chain`.
-pub fn chain_initial_pass(s: &mut Solver, chain: &[usize], search: bool) -> Result<(), Cancelled> {
+pub fn chain_initial_pass(s: &mut Solver, chain: &[usize]) -> Result<(), Cancelled> {
     s.activity.pass = 0;
     s.calibrating = true;
     let r = (|| {
-        if search {
-            s.search_direction(chain[0])?;
-        }
         s.one_bone(chain[0], End::Second, true)?;
         for k in 0..chain.len().saturating_sub(1) {
-            if search {
-                s.search_direction(chain[k + 1])?;
-            }
             s.one_bone(chain[k + 1], End::Second, false)?;
             s.two_bone(chain[k], chain[k + 1])?;
         }
@@ -136,7 +128,7 @@ pub fn register_chain(
 ) -> Result<usize, Cancelled> {
     s.activity.phase = "chain";
     s.refresh()?;
-    chain_initial_pass(s, chain, false)?;
+    chain_initial_pass(s, chain)?;
     let passes = chain_passes(s, chain, settings, true)?;
     Ok(passes + 1)
 }
@@ -157,9 +149,7 @@ pub fn register_skeleton(
             s.activity.phase = "chain";
             s.activity.chain = Some(chain.name.clone());
             if it == 0 && fresh {
-                // The first chain (the spine) takes its direction from the placement; limbs
-                // search theirs.
-                chain_initial_pass(s, &chain.bones, ci > 0)?;
+                chain_initial_pass(s, &chain.bones)?;
             }
             chain_passes(s, &chain.bones, settings, true)?;
             if ci == 0 {
