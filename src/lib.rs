@@ -23,6 +23,9 @@
 //! The core uses only `bevy::math` (glam) from Bevy; the CLI (`src/main.rs`, [`cli`]) is a thin
 //! wrapper over it.
 
+// `!(x > 0.0)` is used on purpose throughout: unlike `x <= 0.0` it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod anatomy;
 pub mod bench;
 pub mod cli;

@@ -269,8 +269,10 @@ impl Skeleton {
                 Some(q) => Quat::from_array(q).normalize(),
                 None => {
                     let rest_axis = rest_f[i] * Vec3::X;
-                    crate::geometry::frames::rotation_arc(rest_axis, (c2 - c1).normalize_or(rest_axis))
-                        * rest_f[i]
+                    crate::geometry::frames::rotation_arc(
+                        rest_axis,
+                        (c2 - c1).normalize_or(rest_axis),
+                    ) * rest_f[i]
                 }
             };
             world_frames.push(frame);
@@ -314,7 +316,7 @@ impl Skeleton {
                 .map(|i| states[i].length / rest.bones[i].length)
                 .unwrap_or(1.0)
         });
-        if !root_position.is_finite() || !(block_scale.is_finite() && block_scale > 0.0) {
+        if !(root_position.is_finite() && block_scale.is_finite() && block_scale > 0.0) {
             return Err(err("invalid root position or block scale".into()));
         }
         Ok(Skeleton {

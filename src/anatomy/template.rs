@@ -295,13 +295,13 @@ impl Template {
                     b.name
                 )));
             }
-            if let Some(ax) = b.bend_axis {
-                if !(Vec3::from(ax).length() > 1e-6) || !ax.iter().all(|v| v.is_finite()) {
-                    return Err(err(format!(
-                        "bone '{}': bend_axis must be a non-zero vector",
-                        b.name
-                    )));
-                }
+            if let Some(ax) = b.bend_axis
+                && (!(Vec3::from(ax).length() > 1e-6) || !ax.iter().all(|v| v.is_finite()))
+            {
+                return Err(err(format!(
+                    "bone '{}': bend_axis must be a non-zero vector",
+                    b.name
+                )));
             }
         }
         for (j, p) in parent_of_joint.iter().enumerate() {
@@ -463,10 +463,10 @@ impl Template {
                     // Consecutive: the bone starts where the previous ends, possibly through a
                     // follower bone in between.
                     let mut start = bones[b].parent;
-                    if let Some(p) = start {
-                        if matches!(bones[p].kind, BoneKind::Follower { .. }) {
-                            start = bones[p].parent;
-                        }
+                    if let Some(p) = start
+                        && matches!(bones[p].kind, BoneKind::Follower { .. })
+                    {
+                        start = bones[p].parent;
                     }
                     if start != Some(prev) {
                         return Err(err(format!(

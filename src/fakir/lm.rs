@@ -13,6 +13,7 @@
 //! * per parameter, the derivative of the bones' `c1, c2, r1, r2` with respect to the
 //!   parameter, by central differences of the skeleton's forward kinematics (a handful of
 //!   bones, not the points; step `1e-4` rad or `1e-4 ×` the statue scale).
+//!
 //! This gives the papers' derivatives (eq. 2.9–2.10 for the two angles, 2.14–2.15 for the two
 //! lengths) for every parameterisation at once, including the block and follower
 //! constraints; tests compare the resulting Jacobian with finite differences of the energy.
@@ -171,11 +172,11 @@ impl Limits {
             l.max_len[i] = hi * rest;
             l.min_r[i] = [0.3 * def.r1 * scale, 0.3 * def.r2 * scale];
             l.max_r[i] = [1.5 * def.r1 * scale, 1.5 * def.r2 * scale];
-            if let Some((c, pos)) = def.chain {
-                if pos > 0 {
-                    let prev = t.chains[c].bones[pos - 1];
-                    l.prev_ratio[i] = Some((prev, w.rest_length(i) / w.rest_length(prev)));
-                }
+            if let Some((c, pos)) = def.chain
+                && pos > 0
+            {
+                let prev = t.chains[c].bones[pos - 1];
+                l.prev_ratio[i] = Some((prev, w.rest_length(i) / w.rest_length(prev)));
             }
         }
         l

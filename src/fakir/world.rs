@@ -68,14 +68,14 @@ impl RadiusClasses {
         let mut ids = std::collections::BTreeMap::new();
         let mut class = vec![0; n];
         let mut members: Vec<Vec<(usize, End)>> = Vec::new();
-        for x in 0..n {
+        for (x, slot) in class.iter_mut().enumerate() {
             let r = find(&mut parent, x);
             let next = ids.len();
             let id = *ids.entry(r).or_insert(next);
             if id == members.len() {
                 members.push(Vec::new());
             }
-            class[x] = id;
+            *slot = id;
             members[id].push((x / 2, if x % 2 == 0 { End::First } else { End::Second }));
         }
         RadiusClasses { class, members }

@@ -52,6 +52,7 @@ pub fn pca(points: &[Vec3]) -> Option<Pca> {
 }
 
 /// Eigen-decomposition of a symmetric 3×3 matrix by cyclic Jacobi rotations.
+#[allow(clippy::needless_range_loop)] // index arithmetic mirrors the textbook rotation
 fn jacobi3(mut a: [[f64; 3]; 3]) -> ([f64; 3], [DVec3; 3]) {
     let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     for _ in 0..50 {
