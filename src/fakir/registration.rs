@@ -5,7 +5,9 @@
 //! 1. **Initialisation** ([`super::init`]): candidate placements, each tried with a short
 //!    registration on a small subsample; the best is kept.
 //! 2. **Level 0**: the whole-skeleton schedule ([`super::schedule`]) on a random subsample
-//!    (`subsample` points, default 8000) until convergence.
+//!    (`subsample` points, default 8000) until convergence, from each of the `finalists`
+//!    (default 3) best candidates; the lowest two-sided score (mean distance + occupancy,
+//!    [`super::solver::Solver::occupancy`]) is kept.
 //! 3. **Level 1** (clouds larger than the subsample): the assignment is redone on all points
 //!    and the schedule refines the skeleton (`final_iterations` whole-skeleton iterations).
 //!
@@ -45,6 +47,8 @@ pub struct RegistrationOptions {
     pub init_subsample: usize,
     /// Whole-skeleton iterations at level 1.
     pub final_iterations: usize,
+    /// Candidates (best short registrations first) that get a full level-0 registration.
+    pub finalists: usize,
     /// Seed of the subsampling.
     pub seed: u64,
     pub solver: SolverSettings,
@@ -62,6 +66,7 @@ impl Default for RegistrationOptions {
             subsample: 8000,
             init_subsample: 1500,
             final_iterations: 1,
+            finalists: 3,
             seed: 7,
             solver: SolverSettings::default(),
             schedule: ScheduleSettings::default(),
@@ -237,19 +242,42 @@ pub fn register(
             }
         }
     }
+    // Finalists: the best candidates by the short registration each get the full level-0
+    // registration; the lowest two-sided score wins (ties to the better short score).
+    let mut order: Vec<usize> = (0..cands.len()).collect();
+    order.sort_by(|&a, &b| {
+        distances
+            .get(a)
+            .unwrap_or(&0.0)
+            .total_cmp(distances.get(b).unwrap_or(&0.0))
+            .then(a.cmp(&b))
+    });
+    order.truncate(opts.finalists.max(1));
+    let mut best: Option<(f64, usize, WorldSkeleton, u64, usize)> = None;
+    for &ci in &order {
+        let c = &cands[ci];
+        let a0 = assignment_of(positions, &normals, &level0, nb, params);
+        let mut s = Solver::new(
+            WorldSkeleton::from_skeleton(&c.skeleton),
+            a0,
+            c.scale,
+            opts.solver.clone(),
+            pause,
+        );
+        s.free_root = free_root;
+        let iterations = register_skeleton(&mut s, &opts.schedule, true).map_err(cancelled)?;
+        let score = s.mean_distance() + s.occupancy();
+        if best.as_ref().is_none_or(|b| score < b.0) {
+            best = Some((score, ci, s.world.clone(), s.units, iterations));
+        }
+    }
+    let (_, chosen, world, units0, mut iterations) = best.expect("at least one finalist");
     let start = &cands[chosen];
-    // Level 0.
     let a0 = assignment_of(positions, &normals, &level0, nb, params);
-    let mut s = Solver::new(
-        WorldSkeleton::from_skeleton(&start.skeleton),
-        a0,
-        start.scale,
-        opts.solver.clone(),
-        pause,
-    );
+    let mut s = Solver::new(world, a0, start.scale, opts.solver.clone(), pause);
     s.free_root = free_root;
-    let fresh = true;
-    let mut iterations = register_skeleton(&mut s, &opts.schedule, fresh).map_err(cancelled)?;
+    s.units = units0;
+    s.refresh().map_err(cancelled)?;
     // Level 1: all points.
     if level0.len() < n {
         s.activity.level = 1;
