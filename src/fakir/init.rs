@@ -15,12 +15,18 @@
 //! 4. **Placement**: the root goes where the template's root sits relative to its centroid,
 //!    mapped by the candidate and the scale, or at the given anchor.
 //! 5. **Choice**: a short registration (one whole-skeleton iteration on a small subsample)
-//!    from each candidate, scored two-sidedly: the mean distance of the points to the model
+//!    from each candidate ranks them; the best few then get a full registration (see
+//!    [`super::registration`]). Both are scored two-sidedly: the mean distance of the points to the model
 //!    (eq. 2.16) plus the mean distance of the model's visible surface to the points
 //!    ([`super::solver::Solver::occupancy`]); the lowest score wins, ties to the earlier
 //!    candidate. The one-sided distance alone cannot tell a flipped skeleton whose bones
 //!    still cover the points from the right one; the flipped one leaves bone surface in
 //!    empty space.
+//! 6. **Anatomy decides near-ties**: a figure registered facing backwards can fit as well as
+//!    the right one (a human's sphere-mesh is nearly front/back symmetric; only feet, knees
+//!    and elbows tell), which would swap left and right. Among the full registrations whose
+//!    two-sided score is within 15% of the best, the one whose pose lies least outside the
+//!    template's joint ranges ([`implausibility`]) wins.
 
 use crate::anatomy::{Skeleton, Template};
 use crate::geometry::pca::{Pca, pca};
@@ -141,4 +147,43 @@ fn frame_alignments(tp: &Pca, cp: &Pca) -> Vec<Quat> {
         }
     }
     out
+}
+
+/// How far a skeleton's pose lies outside the template's joint ranges (radians, summed over
+/// bones): for every free bone with a range — a hinge `bend` about `bend_axis` and a `swing`
+/// cone — the angle by which the bone's direction relative to its parent (compared at the rest
+/// pose) leaves the directions the range allows. Zero for any pose the synthetic generator can
+/// draw; a figure fitted facing backwards pays for its feet and knees.
+pub fn implausibility(s: &Skeleton) -> f64 {
+    let t = &s.template;
+    let rest = Skeleton::rest(s.template.clone());
+    let frames = crate::anatomy::skeleton::rest_frames(t);
+    let mut total = 0.0f64;
+    for (i, def) in t.bones.iter().enumerate() {
+        if def.kind != crate::anatomy::BoneKind::Free
+            || (def.bend.is_none() && def.swing_deg <= 0.0)
+        {
+            continue;
+        }
+        let local = rest.bones[i].rotation.inverse() * s.bones[i].rotation;
+        let world_at_rest = frames[i] * local * frames[i].inverse();
+        let axis = frames[i] * Vec3::X;
+        let dir = world_at_rest * axis;
+        let angle_to = |d: Vec3| -> f32 { d.dot(dir).clamp(-1.0, 1.0).acos() };
+        let best = match def.bend {
+            Some((bend_axis, lo, hi)) => (0..=12)
+                .map(|k| {
+                    angle_to(
+                        Quat::from_axis_angle(
+                            bend_axis,
+                            (lo + (hi - lo) * k as f32 / 12.0).to_radians(),
+                        ) * axis,
+                    )
+                })
+                .fold(f32::INFINITY, f32::min),
+            None => angle_to(axis),
+        };
+        total += (best - def.swing_deg.to_radians()).max(0.0) as f64;
+    }
+    total
 }

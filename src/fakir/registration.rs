@@ -7,7 +7,8 @@
 //! 2. **Level 0**: the whole-skeleton schedule ([`super::schedule`]) on a random subsample
 //!    (`subsample` points, default 8000) until convergence, from each of the `finalists`
 //!    (default 3) best candidates; the lowest two-sided score (mean distance + occupancy,
-//!    [`super::solver::Solver::occupancy`]) is kept.
+//!    [`super::solver::Solver::occupancy`]) is kept, near-ties going to the most plausible
+//!    pose ([`super::init::implausibility`]).
 //! 3. **Level 1** (clouds larger than the subsample): the assignment is redone on all points
 //!    and the schedule refines the skeleton (`final_iterations` whole-skeleton iterations).
 //!
@@ -253,7 +254,7 @@ pub fn register(
             .then(a.cmp(&b))
     });
     order.truncate(opts.finalists.max(1));
-    let mut best: Option<(f64, usize, WorldSkeleton, u64, usize)> = None;
+    let mut finals: Vec<(f64, f64, usize, WorldSkeleton, u64, usize)> = Vec::new();
     for &ci in &order {
         let c = &cands[ci];
         let a0 = assignment_of(positions, &normals, &level0, nb, params);
@@ -267,11 +268,19 @@ pub fn register(
         s.free_root = free_root;
         let iterations = register_skeleton(&mut s, &opts.schedule, true).map_err(cancelled)?;
         let score = s.mean_distance() + s.occupancy();
-        if best.as_ref().is_none_or(|b| score < b.0) {
-            best = Some((score, ci, s.world.clone(), s.units, iterations));
-        }
+        let implausible = super::init::implausibility(&s.world.to_skeleton());
+        finals.push((score, implausible, ci, s.world.clone(), s.units, iterations));
     }
-    let (_, chosen, world, units0, mut iterations) = best.expect("at least one finalist");
+    // Near-ties (within 15% of the best score) are decided by anatomy (see `init`).
+    let best_score = finals.iter().map(|f| f.0).fold(f64::INFINITY, f64::min);
+    let pick = finals
+        .iter()
+        .enumerate()
+        .filter(|(_, f)| f.0 <= 1.15 * best_score)
+        .min_by(|(_, a), (_, b)| a.1.total_cmp(&b.1).then(a.0.total_cmp(&b.0)))
+        .map(|(i, _)| i)
+        .expect("at least one finalist");
+    let (_, _, chosen, world, units0, mut iterations) = finals.swap_remove(pick);
     let start = &cands[chosen];
     let a0 = assignment_of(positions, &normals, &level0, nb, params);
     let mut s = Solver::new(world, a0, start.scale, opts.solver.clone(), pause);
