@@ -111,8 +111,8 @@ pub struct Fit {
     pub candidate_distances: Vec<f64>,
 }
 
-/// Checks a cloud for registration and returns its normals (estimated when absent).
-fn prepare(cloud: &PointCloud, template: &Template) -> Result<Vec<Vec3>> {
+/// Refuses clouds with fewer than 20 points per bone of the template.
+fn check_point_count(cloud: &PointCloud, template: &Template) -> Result<()> {
     let min_points = 20 * template.bones.len();
     if cloud.len() < min_points {
         return Err(Error::input(format!(
@@ -121,6 +121,12 @@ fn prepare(cloud: &PointCloud, template: &Template) -> Result<Vec<Vec3>> {
             cloud.len()
         )));
     }
+    Ok(())
+}
+
+/// Checks a cloud for registration and returns its normals (estimated when absent).
+fn prepare(cloud: &PointCloud, template: &Template) -> Result<Vec<Vec3>> {
+    check_point_count(cloud, template)?;
     if let Some(i) = cloud.positions.iter().position(|p| !p.is_finite()) {
         return Err(Error::input(format!(
             "point {i} has a non-finite coordinate"
@@ -382,14 +388,7 @@ impl Registration {
         template: Arc<Template>,
         opts: RegistrationOptions,
     ) -> Result<Self> {
-        let min_points = 20 * template.bones.len();
-        if cloud.len() < min_points {
-            return Err(Error::input(format!(
-                "too few points to fit the '{}' template: {} (at least {min_points} needed)",
-                template.name,
-                cloud.len()
-            )));
-        }
+        check_point_count(&cloud, &template)?;
         Ok(Registration {
             cloud,
             template,

@@ -357,13 +357,19 @@ impl<'p> Solver<'p> {
                     &[b],
                 )?;
             }
-            self.refresh()?;
-            let after = self.energy_of(&energy);
-            if (before - after).abs() <= 1e-4 * before.max(1e-30) {
+            if self.end_round(&energy, before)? {
                 break;
             }
         }
         Ok(())
+    }
+
+    /// Ends a round of a fit: refreshes the assignment and tells whether the energy of `bones`
+    /// changed by less than 1e-4 (relative) since `before`.
+    fn end_round(&mut self, bones: &[usize], before: f64) -> Result<bool, Cancelled> {
+        self.refresh()?;
+        let after = self.energy_of(bones);
+        Ok((before - after).abs() <= 1e-4 * before.max(1e-30))
     }
 
     /// Two-bone fit of the joint between `a` and its chain successor `b` (thesis §2.3.2): the
@@ -389,9 +395,7 @@ impl<'p> Solver<'p> {
                 &energy,
                 &clamp,
             )?;
-            self.refresh()?;
-            let after = self.energy_of(&energy);
-            if (before - after).abs() <= 1e-4 * before.max(1e-30) {
+            if self.end_round(&energy, before)? {
                 break;
             }
         }
