@@ -5,7 +5,8 @@
 use super::{BenchResult, Entry, time_it};
 use crate::anatomy::{Skeleton, Template};
 use crate::error::Result;
-use crate::fakir::{Fit, Init, Registration, RegistrationOptions};
+use crate::fakir::solver::{Cancelled, Pause, Solver};
+use crate::fakir::{Fit, Init, Registration, RegistrationOptions, register};
 use crate::math::Quat;
 use crate::synth::{SynthOptions, SynthStatue, chain4, generate};
 use std::sync::Arc;
@@ -23,6 +24,10 @@ pub(super) fn entries() -> Vec<Entry> {
         Entry {
             name: "fakir/human_140k",
             run: human_140k,
+        },
+        Entry {
+            name: "fakir/unit_100k",
+            run: unit_100k,
         },
     ]
 }
@@ -113,4 +118,58 @@ fn human_140k(runs: usize) -> Result<BenchResult> {
         1.7,
         runs.min(3),
     )
+}
+
+/// Records the wall time between consecutive work units.
+struct UnitTimer {
+    last: std::time::Instant,
+    durations: Vec<f64>,
+}
+
+impl Pause for UnitTimer {
+    fn unit(&mut self, _: &Solver) -> Result<(), Cancelled> {
+        let now = std::time::Instant::now();
+        self.durations.push((now - self.last).as_secs_f64());
+        self.last = now;
+        Ok(())
+    }
+}
+
+/// The longest work unit of a registration of a 100k-point synthetic human (the kiosk
+/// registers between frames, so no unit may take more than about 2 ms). `median_s` is the
+/// whole registration; `extra` gives the longest unit and the 99th and 50th percentiles.
+fn unit_100k(runs: usize) -> Result<BenchResult> {
+    let statue = human(100_000)?;
+    let t = statue.truth.template.clone();
+    let mut durations = Vec::new();
+    let mut r = time_it(
+        "fakir/unit_100k",
+        statue.cloud.len() as u64,
+        runs.min(3),
+        || {
+            let mut timer = UnitTimer {
+                last: std::time::Instant::now(),
+                durations: Vec::new(),
+            };
+            let _ = register(
+                &statue.cloud,
+                t.clone(),
+                &RegistrationOptions::default(),
+                &mut timer,
+            );
+            durations = timer.durations;
+        },
+    );
+    durations.sort_by(f64::total_cmp);
+    let pick = |q: f64| {
+        durations
+            .get(((durations.len() as f64 - 1.0) * q).round() as usize)
+            .copied()
+            .unwrap_or(0.0)
+    };
+    r.extra.insert("units".into(), durations.len() as f64);
+    r.extra.insert("max_unit_ms".into(), 1e3 * pick(1.0));
+    r.extra.insert("p99_unit_ms".into(), 1e3 * pick(0.99));
+    r.extra.insert("p50_unit_ms".into(), 1e3 * pick(0.5));
+    Ok(r)
 }
