@@ -11,6 +11,10 @@ use crate::anatomy::template::BoneKind;
 use crate::geometry::{Bone, PreparedBone};
 use crate::math::Vec3;
 
+/// Most points one slice of an assignment refresh scans (each point also reads its whole row
+/// of distances, so the slice is bounded even when few bones moved).
+pub const MAX_REFRESH_SLICE: usize = 16_384;
+
 /// Raised by a pause hook to abandon the registration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Cancelled;
@@ -180,7 +184,9 @@ impl<'p> Solver<'p> {
         }
         let prepared: Vec<PreparedBone> = bones.iter().map(|b| b.prepare()).collect();
         let n = self.assignment.len();
-        let slice = (self.settings.refresh_budget / moved.len().max(1)).max(1024);
+        // Bounded work per slice: projections (budget / bones moved) and rows scanned.
+        let slice =
+            (self.settings.refresh_budget / moved.len().max(1)).clamp(1024, MAX_REFRESH_SLICE);
         let mut start = 0;
         let prev_phase = self.activity.phase;
         self.activity.phase = "assignment";
