@@ -470,3 +470,38 @@ fn incremental_culled_assignment_equals_a_full_recomputation() {
         }
     }
 }
+
+#[test]
+fn registration_fits_rest_pose_quadruped_centaur_and_mermaid() {
+    use pygmalion::anatomy::Template;
+    use pygmalion::fakir::{Registration, RegistrationOptions};
+    use pygmalion::synth::{SynthOptions, generate};
+    use std::sync::Arc;
+    for name in ["quadruped", "centaur", "mermaid"] {
+        let t = Arc::new(Template::builtin(name).unwrap());
+        let s = generate(
+            t.clone(),
+            &SynthOptions {
+                points: 6_000,
+                seed: 9,
+                rigid: true,
+                random_pose: false,
+                proportion_jitter: 0.1,
+                height: 1.0,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let fit = Registration::new(Arc::new(s.cloud.clone()), t, RegistrationOptions::default())
+            .unwrap()
+            .run_to_convergence()
+            .unwrap();
+        let err = joint_error(&fit.skeleton, &s.truth, 1.0);
+        println!(
+            "{name}: joint error {:.2}% of height, mean distance {:.5}",
+            100.0 * err,
+            fit.mean_distance
+        );
+        assert!(err < 0.03, "{name}: joint error {err}");
+    }
+}
