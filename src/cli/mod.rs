@@ -2,7 +2,7 @@
 //!
 //! | command | what it does |
 //! |---|---|
-//! | `demo` (default) | loads the bundled demo statue and reports on it |
+//! | `demo` (default) | loads the bundled demo statue, reports on it and fits the human anatomy |
 //! | `info FILE` | points, bounding box, normals present, scale estimate |
 //! | `normals IN OUT [--k 16]` | (re-)estimates oriented normals, points kept in input order |
 //! | `synth OUT.ply [--template human] [--seed N] ...` | a synthetic statue with ground truth |
@@ -38,7 +38,8 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Loads the bundled demo statue and reports on it (the default command).
+    /// Loads the bundled demo statue, reports on it and fits the human anatomy (the default
+    /// command).
     Demo,
     /// Points, bounding box, normals present, scale estimate of a PLY file.
     Info {
@@ -356,10 +357,15 @@ fn demo() -> Result<()> {
     }
     let template = Template::builtin("human")?;
     println!(
-        "template '{}': {} bones in {} chains",
+        "template '{}': {} bones in {} chains; fitting it with FAKIR …",
         template.name,
         template.bones.len(),
         template.chains.len()
+    );
+    register::run(path, "human", None, None, None, None, false)?;
+    println!(
+        "(try: pygmalion register {} --out FIT.json --labels LABELS.ply)",
+        path.display()
     );
     Ok(())
 }
