@@ -8,6 +8,7 @@
 mod common;
 
 mod anatomy;
+mod cli;
 mod cloud_normals;
 mod cloud_ply;
 mod fakir;
