@@ -8,6 +8,21 @@ use pygmalion::fakir::world::WorldSkeleton;
 use pygmalion::math::{Quat, Vec3};
 use pygmalion::synth::{SynthStatue, chain4};
 
+/// An assignment of all the points of a chain statue to its 4 bones.
+fn assignment_of(s: &SynthStatue, cone_abs: f32) -> Assignment {
+    let n = s.cloud.len();
+    Assignment::new(
+        s.cloud.positions.clone(),
+        s.cloud.normals.clone().unwrap(),
+        (0..n as u32).collect(),
+        4,
+        AssignParams {
+            cone_slack: 0.2,
+            cone_abs,
+        },
+    )
+}
+
 /// Fits a generic straight 4-bone chain (equal lengths 35, radii 7, pointing away from the
 /// data) anchored at the true first extremity; returns (mean distance, joint errors, units).
 fn fit_chain(s: &SynthStatue, settings: &ScheduleSettings) -> (f64, Vec<f32>, u64) {
@@ -20,17 +35,7 @@ fn fit_chain(s: &SynthStatue, settings: &ScheduleSettings) -> (f64, Vec<f32>, u6
     }
     init.root_rotation = Quat::from_rotation_z(0.9);
     let world = WorldSkeleton::from_skeleton(&init);
-    let n = s.cloud.len();
-    let asg = Assignment::new(
-        s.cloud.positions.clone(),
-        s.cloud.normals.clone().unwrap(),
-        (0..n as u32).collect(),
-        4,
-        AssignParams {
-            cone_slack: 0.2,
-            cone_abs: 0.28,
-        },
-    );
+    let asg = assignment_of(s, 0.28);
     let mut pause = NoPause;
     let mut solver = Solver::new(world, asg, 1.0, SolverSettings::default(), &mut pause);
     solver.free_root = true;
@@ -122,17 +127,7 @@ fn two_bone_fit_recovers_a_displaced_joint() {
     );
     let truth = s.truth.pose();
     assert!((w.pose().joints[1] - truth.joints[1]).length() > 5.0);
-    let n = s.cloud.len();
-    let asg = Assignment::new(
-        s.cloud.positions.clone(),
-        s.cloud.normals.clone().unwrap(),
-        (0..n as u32).collect(),
-        4,
-        AssignParams {
-            cone_slack: 0.2,
-            cone_abs: 0.0,
-        },
-    );
+    let asg = assignment_of(&s, 0.0);
     let mut pause = NoPause;
     let mut solver = Solver::new(
         w,
