@@ -240,7 +240,7 @@ fn lm_gradient_matches_finite_differences_of_the_energy() {
             assignment: &asg,
             members: &members,
             bones: &bones,
-            cap: None,
+            occupancy: None,
         };
         let (_, jtr, energy) = normal_equations(&w, &classes, &params, &terms, size);
         for (j, p) in params.iter().enumerate() {

@@ -230,7 +230,7 @@ pub struct EnergyTerms<'a> {
     /// Bones whose points make up the energy.
     pub bones: &'a [usize],
     /// Optional occupancy term (model → data).
-    pub cap: Option<OccupancyTerm<'a>>,
+    pub occupancy: Option<OccupancyTerm<'a>>,
 }
 
 /// The occupancy term (model → data) of chain extremities: samples on the visible surface of
@@ -390,9 +390,9 @@ impl EnergyTerms<'_> {
         total
     }
 
-    /// Data energy plus the cap term, for a world skeleton.
+    /// Data energy plus the occupancy term, for a world skeleton.
     pub fn total_energy(&self, w: &WorldSkeleton) -> f64 {
-        self.energy(&w.bones()) + self.cap.as_ref().map_or(0.0, |c| c.energy(w))
+        self.energy(&w.bones()) + self.occupancy.as_ref().map_or(0.0, |c| c.energy(w))
     }
 }
 
@@ -430,7 +430,7 @@ pub fn normal_equations(
     let n_bones = base_bones.len();
     // Geometry Jacobian by central differences of the forward kinematics.
     let mut geo = vec![[GeoDeriv::default(); MAX_PARAMS]; n_bones];
-    let mut cap_deriv: Vec<Vec<Vec3>> = vec![Vec::new(); MAX_PARAMS];
+    let mut occ_deriv: Vec<Vec<Vec3>> = vec![Vec::new(); MAX_PARAMS];
     for (j, p) in params.iter().enumerate() {
         let h = fd_step(p, size);
         let mut plus = w.clone();
@@ -438,9 +438,9 @@ pub fn normal_equations(
         let mut minus = w.clone();
         apply(&mut minus, classes, p, -h);
         let (bp, bm) = (plus.bones(), minus.bones());
-        if let Some(cap) = &terms.cap {
-            let (sp, sm) = (cap.all_samples(&plus), cap.all_samples(&minus));
-            cap_deriv[j] = sp
+        if let Some(occ) = &terms.occupancy {
+            let (sp, sm) = (occ.all_samples(&plus), occ.all_samples(&minus));
+            occ_deriv[j] = sp
                 .iter()
                 .zip(&sm)
                 .map(|(a, b)| (*a - *b) / (2.0 * h))
@@ -504,11 +504,11 @@ pub fn normal_equations(
             energy += pe;
         }
     }
-    if let Some(cap) = &terms.cap {
-        for (q, (r, e, wgt)) in cap.residuals(w).iter().enumerate() {
+    if let Some(occ) = &terms.occupancy {
+        for (q, (r, e, wgt)) in occ.residuals(w).iter().enumerate() {
             let mut row = [0.0f64; MAX_PARAMS];
             for j in 0..k {
-                row[j] = wgt * e.dot(cap_deriv[j][q]) as f64;
+                row[j] = wgt * e.dot(occ_deriv[j][q]) as f64;
             }
             energy += r * r;
             for j in 0..k {

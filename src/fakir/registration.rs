@@ -352,13 +352,15 @@ struct ChannelPause {
 impl Pause for ChannelPause {
     fn unit(&mut self, s: &Solver) -> Result<(), Cancelled> {
         self.units += 1;
-        if let Ok(mut p) = self.progress.lock() {
-            p.activity = s.activity.clone();
-            p.units = self.units;
-            p.mean_distance = s.mean_distance();
-            p.skeleton = Some(s.world.to_skeleton());
-        }
         if Instant::now() >= self.deadline {
+            // Progress is only read while the worker waits, so it is published here, not after
+            // every unit (the mean distance is a pass over all points).
+            if let Ok(mut p) = self.progress.lock() {
+                p.activity = s.activity.clone();
+                p.units = self.units;
+                p.mean_distance = s.mean_distance();
+                p.skeleton = Some(s.world.to_skeleton());
+            }
             if self.msgs.send(Msg::Paused).is_err() {
                 return Err(Cancelled);
             }

@@ -272,9 +272,9 @@ impl<'p> Solver<'p> {
                 assignment: &self.assignment,
                 members: &self.members,
                 bones: energy_bones,
-                cap: occupancy,
+                occupancy: occupancy,
             };
-            if terms.count() == 0 && terms.cap.is_none() {
+            if terms.count() == 0 && terms.occupancy.is_none() {
                 return Ok(0.0);
             }
             let limits = if self.calibrating {
@@ -452,7 +452,7 @@ impl<'p> Solver<'p> {
             assignment: &self.assignment,
             members: &self.members,
             bones,
-            cap: None,
+            occupancy: None,
         }
         .energy(&self.world.bones())
     }

@@ -99,10 +99,11 @@ pub struct WorldSkeleton {
     pub lengths: Vec<f32>,
     pub r1: Vec<f32>,
     pub r2: Vec<f32>,
-    /// Rest rotation of each bone relative to its parent (constraints use it).
-    rest_relative: Vec<Quat>,
+    /// Rest rotation of each bone relative to its parent (constraints use it); shared, as
+    /// the LM clones the world skeleton several times per iteration.
+    rest_relative: Arc<[Quat]>,
     /// Rest lengths and radii of the template (unscaled).
-    rest_lengths: Vec<f32>,
+    rest_lengths: Arc<[f32]>,
 }
 
 impl WorldSkeleton {
@@ -119,8 +120,18 @@ impl WorldSkeleton {
             lengths: s.bones.iter().map(|b| b.length).collect(),
             r1: s.bones.iter().map(|b| b.r1).collect(),
             r2: s.bones.iter().map(|b| b.r2).collect(),
-            rest_relative: rest.bones.iter().map(|b| b.rotation).collect(),
-            rest_lengths: rest.bones.iter().map(|b| b.length).collect(),
+            rest_relative: rest
+                .bones
+                .iter()
+                .map(|b| b.rotation)
+                .collect::<Vec<_>>()
+                .into(),
+            rest_lengths: rest
+                .bones
+                .iter()
+                .map(|b| b.length)
+                .collect::<Vec<_>>()
+                .into(),
         }
     }
 
