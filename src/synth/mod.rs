@@ -188,73 +188,111 @@ pub fn generate(template: Arc<Template>, opts: &SynthOptions) -> Result<SynthSta
     let posed = skel.pose();
     let (mut positions, mut normals, mut labels) =
         sample_envelope(&posed.bones, opts.points, opts.height, &mut rng);
-    if opts.noise_sigma > 0.0 || opts.poisson_lambda > 0.0 {
-        for (p, n) in positions.iter_mut().zip(&normals) {
-            let mut d = 0.0;
-            if opts.noise_sigma > 0.0 {
-                d += opts.noise_sigma * rng.normal();
-            }
-            if opts.poisson_lambda > 0.0 {
-                d += rng.poisson(opts.poisson_lambda) as f32 - opts.poisson_lambda;
-            }
-            *p += d * *n;
-        }
-    }
-    if !opts.cuts.is_empty() {
-        let mut keep = vec![true; positions.len()];
-        for cut in &opts.cuts {
-            match cut {
-                Cut::Plane { point, normal } => {
-                    let n = normal.normalize();
-                    for (k, p) in keep.iter_mut().zip(&positions) {
-                        if (*p - *point).dot(n) > 0.0 {
-                            *k = false;
-                        }
-                    }
-                }
-                Cut::Bone { bone, at } => {
-                    let b = template.bone_index(bone).ok_or_else(|| {
-                        Error::input(format!(
-                            "cut: unknown bone '{bone}' in template '{}'",
-                            template.name
-                        ))
-                    })?;
-                    let below = template.subtree(b);
-                    let geo = posed.bones[b];
-                    let axis = (geo.c2 - geo.c1).normalize();
-                    let q = geo.c1 + *at * (geo.c2 - geo.c1);
-                    for i in 0..positions.len() {
-                        let l = labels[i] as usize;
-                        if l == b {
-                            if (positions[i] - q).dot(axis) > 0.0 {
-                                keep[i] = false;
-                            }
-                        } else if below.contains(&l) {
-                            keep[i] = false;
-                        }
-                    }
-                }
-            }
-        }
-        let mut j = 0;
-        for i in 0..positions.len() {
-            if keep[i] {
-                positions[j] = positions[i];
-                normals[j] = normals[i];
-                labels[j] = labels[i];
-                j += 1;
-            }
-        }
-        positions.truncate(j);
-        normals.truncate(j);
-        labels.truncate(j);
-    }
+    displace_along_normals(
+        &mut positions,
+        &normals,
+        opts.noise_sigma,
+        opts.poisson_lambda,
+        &mut rng,
+    );
+    apply_cuts(
+        &template,
+        &posed.bones,
+        &opts.cuts,
+        &mut positions,
+        &mut normals,
+        &mut labels,
+    )?;
     Ok(SynthStatue {
         cloud: PointCloud::with_normals(positions, normals),
         truth: skel,
         labels,
         rigid,
     })
+}
+
+/// Moves every point along its normal by Gaussian noise `σ` and zero-mean Poisson noise
+/// `K − λ` (see the module docs); draws nothing when both are zero.
+fn displace_along_normals(
+    positions: &mut [Vec3],
+    normals: &[Vec3],
+    sigma: f32,
+    lambda: f32,
+    rng: &mut Rng,
+) {
+    if sigma <= 0.0 && lambda <= 0.0 {
+        return;
+    }
+    for (p, n) in positions.iter_mut().zip(normals) {
+        let mut d = 0.0;
+        if sigma > 0.0 {
+            d += sigma * rng.normal();
+        }
+        if lambda > 0.0 {
+            d += rng.poisson(lambda) as f32 - lambda;
+        }
+        *p += d * *n;
+    }
+}
+
+/// Removes the points that `cuts` take away (see [`Cut`]), keeping the three arrays aligned.
+fn apply_cuts(
+    template: &Template,
+    bones: &[Bone],
+    cuts: &[Cut],
+    positions: &mut Vec<Vec3>,
+    normals: &mut Vec<Vec3>,
+    labels: &mut Vec<u32>,
+) -> Result<()> {
+    if cuts.is_empty() {
+        return Ok(());
+    }
+    let mut keep = vec![true; positions.len()];
+    for cut in cuts {
+        match cut {
+            Cut::Plane { point, normal } => {
+                let n = normal.normalize();
+                for (k, p) in keep.iter_mut().zip(positions.iter()) {
+                    if (*p - *point).dot(n) > 0.0 {
+                        *k = false;
+                    }
+                }
+            }
+            Cut::Bone { bone, at } => {
+                let b = template.bone_index(bone).ok_or_else(|| {
+                    Error::input(format!(
+                        "cut: unknown bone '{bone}' in template '{}'",
+                        template.name
+                    ))
+                })?;
+                let below = template.subtree(b);
+                let geo = bones[b];
+                let axis = (geo.c2 - geo.c1).normalize();
+                let q = geo.c1 + *at * (geo.c2 - geo.c1);
+                for i in 0..positions.len() {
+                    let l = labels[i] as usize;
+                    if (l == b && (positions[i] - q).dot(axis) > 0.0)
+                        || (l != b && below.contains(&l))
+                    {
+                        keep[i] = false;
+                    }
+                }
+            }
+        }
+    }
+    let mut j = 0;
+    for i in 0..positions.len() {
+        if keep[i] {
+            positions[j] = positions[i];
+            normals[j] = normals[i];
+            labels[j] = labels[i];
+            j += 1;
+        }
+    }
+    positions.truncate(j);
+    normals.truncate(j);
+    labels.truncate(j);
+    Ok(())
 }
 
 /// Samples `n` points area-uniformly on the outer envelope of `bones` (see the module docs).
@@ -467,35 +505,24 @@ pub fn chain4(
     }
     let posed = skel.pose();
     let mut rng = Rng::new(seed);
-    let (mut positions, normals, mut labels) =
+    let (mut positions, mut normals, mut labels) =
         sample_envelope(&posed.bones, points, 140.0, &mut rng);
-    for (p, n) in positions.iter_mut().zip(&normals) {
-        let mut d = 0.0;
-        if noise_sigma > 0.0 {
-            d += noise_sigma * rng.normal();
-        }
-        if poisson_lambda > 0.0 {
-            d += rng.poisson(poisson_lambda) as f32 - poisson_lambda;
-        }
-        *p += d * *n;
-    }
-    let mut cloud = PointCloud::with_normals(positions, normals);
-    for cut in &cuts {
-        if let Cut::Plane { point, normal } = cut {
-            let n = normal.normalize();
-            let keep: Vec<bool> = cloud
-                .positions
-                .iter()
-                .map(|p| (*p - *point).dot(n) <= 0.0)
-                .collect();
-            cloud.retain_indices(|i| keep[i]);
-            let mut k = 0;
-            labels.retain(|_| {
-                k += 1;
-                keep[k - 1]
-            });
-        }
-    }
+    displace_along_normals(
+        &mut positions,
+        &normals,
+        noise_sigma,
+        poisson_lambda,
+        &mut rng,
+    );
+    apply_cuts(
+        &t,
+        &posed.bones,
+        &cuts,
+        &mut positions,
+        &mut normals,
+        &mut labels,
+    )?;
+    let cloud = PointCloud::with_normals(positions, normals);
     Ok(SynthStatue {
         cloud,
         truth: skel,
