@@ -230,6 +230,11 @@ pub(crate) fn read(path: &Path, drop_non_finite: bool) -> Result<crate::cloud::P
 fn info(path: &Path, drop_non_finite: bool) -> Result<()> {
     let t = Instant::now();
     let cloud = read(path, drop_non_finite)?;
+    report(path, &cloud, t.elapsed().as_secs_f64())
+}
+
+/// Prints what `info` prints for a cloud already read.
+fn report(path: &Path, cloud: &crate::cloud::PointCloud, read_secs: f64) -> Result<()> {
     let bb = cloud
         .bounding_box()
         .ok_or_else(|| Error::input(format!("{}: no points", path.display())))?;
@@ -269,7 +274,7 @@ fn info(path: &Path, drop_non_finite: bool) -> Result<()> {
         "scale:       {:.6} (largest bounding-box edge)",
         cloud.scale_estimate()
     );
-    println!("read in:     {:.3} s", t.elapsed().as_secs_f64());
+    println!("read in:     {read_secs:.3} s");
     Ok(())
 }
 
@@ -342,8 +347,9 @@ fn demo() -> Result<()> {
         )));
     }
     println!("Pygmalion demo: Thorvaldsen's Dancing Girl (scan by Geoffrey Marchal, CC BY 4.0)\n");
-    info(path, false)?;
+    let t = Instant::now();
     let cloud = read(path, false)?;
+    report(path, &cloud, t.elapsed().as_secs_f64())?;
     let t = Instant::now();
     let est = estimate_normals(&cloud.positions, &NormalOptions::default())?;
     let secs = t.elapsed().as_secs_f64();
@@ -362,7 +368,14 @@ fn demo() -> Result<()> {
         template.bones.len(),
         template.chains.len()
     );
-    register::run(path, "human", None, None, None, None, false)?;
+    register::fit(
+        path,
+        Arc::new(cloud),
+        Arc::new(template),
+        crate::fakir::Init::Auto,
+        None,
+        None,
+    )?;
     println!(
         "(try: pygmalion register {} --out FIT.json --labels LABELS.ply)",
         path.display()

@@ -106,7 +106,19 @@ pub fn run(
         (None, Some(up)) => Init::Up(up),
         (None, None) => Init::Auto,
     };
-    let cloud = Arc::new(cloud);
+    fit(input, Arc::new(cloud), template, init, out, labels)
+}
+
+/// Fits `template` to a cloud already read from `input` (named in messages), with the
+/// progress line, the summary and the optional outputs of `register`.
+pub fn fit(
+    input: &Path,
+    cloud: Arc<crate::cloud::PointCloud>,
+    template: Arc<Template>,
+    init: Init,
+    out: Option<&Path>,
+    labels: Option<&Path>,
+) -> Result<()> {
     let opts = RegistrationOptions {
         init,
         ..Default::default()
