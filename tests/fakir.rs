@@ -265,13 +265,7 @@ fn lm_gradient_matches_finite_differences_of_the_energy() {
 
 /// Mean joint error of a fitted skeleton against the truth, as a fraction of `height`.
 pub fn joint_error(fit: &Skeleton, truth: &Skeleton, height: f32) -> f32 {
-    let (a, b) = (fit.pose().joints, truth.pose().joints);
-    a.iter()
-        .zip(&b)
-        .map(|(x, y)| (*x - *y).length())
-        .sum::<f32>()
-        / a.len() as f32
-        / height
+    fit.mean_joint_distance(truth) / height
 }
 
 fn small_human(seed: u64, points: usize, random_pose: bool) -> SynthStatue {

@@ -183,16 +183,6 @@ impl Skeleton {
         }
     }
 
-    /// Sets bone `b`'s world frame to `world` (keeping its parent), i.e. its relative rotation
-    /// to `parent_frame⁻¹ · world`, given the current world frames `frames`.
-    pub fn set_world_frame(&mut self, b: usize, world: Quat, frames: &[Quat]) {
-        let parent = self.template.bones[b]
-            .parent
-            .map(|p| frames[p])
-            .unwrap_or(self.root_rotation);
-        self.bones[b].rotation = (parent.inverse() * world).normalize();
-    }
-
     /// A world-space rigid motion of the whole skeleton: `x ↦ rotation · x + translation`.
     pub fn transform_rigid(&mut self, rotation: Quat, translation: Vec3) {
         self.root_position = rotation * self.root_position + translation;
@@ -356,6 +346,17 @@ impl Skeleton {
             ),
         };
         Skeleton::from_json(template, &json, path)
+    }
+
+    /// Mean distance between corresponding joints of two skeletons of the same template (the
+    /// joint error used to grade a fit against a ground truth).
+    pub fn mean_joint_distance(&self, other: &Skeleton) -> f32 {
+        let (a, b) = (self.pose().joints, other.pose().joints);
+        a.iter()
+            .zip(&b)
+            .map(|(x, y)| (*x - *y).length())
+            .sum::<f32>()
+            / a.len().max(1) as f32
     }
 
     /// World position of the joint called `name`.

@@ -32,17 +32,6 @@ pub(super) fn entries() -> Vec<Entry> {
     ]
 }
 
-/// Mean joint error as a fraction of `height`.
-fn joint_error(fit: &Skeleton, truth: &Skeleton, height: f32) -> f64 {
-    let (a, b) = (fit.pose().joints, truth.pose().joints);
-    a.iter()
-        .zip(&b)
-        .map(|(x, y)| (*x - *y).length() as f64)
-        .sum::<f64>()
-        / a.len() as f64
-        / height as f64
-}
-
 fn run_case(
     name: &str,
     statue: &SynthStatue,
@@ -63,7 +52,7 @@ fn run_case(
     r.extra.insert("mean_distance".into(), fit.mean_distance);
     r.extra.insert(
         "joint_error_pct".into(),
-        100.0 * joint_error(&fit.skeleton, &statue.truth, height),
+        100.0 * (fit.skeleton.mean_joint_distance(&statue.truth) / height) as f64,
     );
     r.extra.insert("iterations".into(), fit.iterations as f64);
     r.extra.insert("work_units".into(), fit.units as f64);
