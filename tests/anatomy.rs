@@ -235,6 +235,13 @@ fn template_validation_errors_are_clear() {
         "must start at the root",
     );
     expect_config_error("this is not toml = = =", "invalid template");
+    // Two joints ending each other's bones: a cycle the root never reaches.
+    let cycle = format!(
+        "{MINI}\n[[joints]]\nname = \"x\"\nat = [1, 0, 0]\n[[joints]]\nname = \"y\"\nat = [2, 0, 0]\n\
+         [[bones]]\nname = \"xy\"\nfrom = \"x\"\nto = \"y\"\nr1 = 0.1\nr2 = 0.1\n\
+         [[bones]]\nname = \"yx\"\nfrom = \"y\"\nto = \"x\"\nr1 = 0.1\nr2 = 0.1\n"
+    );
+    expect_config_error(&cycle, "not connected to the root: xy, yx");
     expect_config_error(&MINI.replace("r1 = 0.2", "r1 = 1.5"), "contains the other");
     // A missing file names the file.
     match Template::load("/nonexistent/dir/t.toml") {

@@ -312,59 +312,37 @@ impl Template {
                 )));
             }
         }
-        // Reachability from the root (detects cycles).
-        let mut order: Vec<usize> = Vec::with_capacity(file.bones.len());
+        // Depth of every joint below the root. Each joint ends exactly one bone (checked
+        // above), so a joint the root never reaches is disconnected, or on a cycle.
+        let mut joint_depth: Vec<Option<usize>> = vec![None; file.joints.len()];
+        joint_depth[root] = Some(0);
         let mut frontier = vec![root];
-        let mut seen_joint = vec![false; file.joints.len()];
-        seen_joint[root] = true;
         while let Some(j) = frontier.pop() {
-            // Keep file order among siblings: push in reverse after collecting.
-            let kids: Vec<usize> = file
+            for b in file
                 .bones
                 .iter()
-                .enumerate()
-                .filter(|(_, b)| joint_index[b.from.as_str()] == j)
-                .map(|(i, _)| i)
-                .collect();
-            for &k in kids.iter() {
-                order.push(k);
-            }
-            for &k in kids.iter().rev() {
-                let t = joint_index[file.bones[k].to.as_str()];
-                if seen_joint[t] {
-                    return Err(err(format!(
-                        "the bones around joint '{}' form a cycle",
-                        file.joints[t].name
-                    )));
-                }
-                seen_joint[t] = true;
+                .filter(|b| joint_index[b.from.as_str()] == j)
+            {
+                let t = joint_index[b.to.as_str()];
+                joint_depth[t] = joint_depth[j].map(|d| d + 1);
                 frontier.push(t);
             }
         }
-        if order.len() != file.bones.len() {
-            let lost: Vec<&str> = file
-                .bones
-                .iter()
-                .enumerate()
-                .filter(|(i, _)| !order.contains(i))
-                .map(|(_, b)| b.name.as_str())
-                .collect();
+        let lost: Vec<&str> = file
+            .bones
+            .iter()
+            .filter(|b| joint_depth[joint_index[b.from.as_str()]].is_none())
+            .map(|b| b.name.as_str())
+            .collect();
+        if !lost.is_empty() {
             return Err(err(format!(
                 "bones not connected to the root: {}",
                 lost.join(", ")
             )));
         }
-        // Stable topological order: sort by depth, then file order.
-        let depth_of = |mut b: usize| {
-            let mut d = 0;
-            while let Some(p) = parent_of_joint[joint_index[file.bones[b].from.as_str()]] {
-                b = p;
-                d += 1;
-            }
-            d
-        };
+        // Stable topological order: by depth, then file order.
         let mut order: Vec<usize> = (0..file.bones.len()).collect();
-        order.sort_by_key(|&b| (depth_of(b), b));
+        order.sort_by_key(|&b| (joint_depth[joint_index[file.bones[b].from.as_str()]], b));
         let new_of_old: Vec<usize> = {
             let mut v = vec![0; order.len()];
             for (new, &old) in order.iter().enumerate() {
