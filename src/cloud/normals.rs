@@ -689,25 +689,10 @@ fn orient(
             }
         });
     // Counting sort of the kept edges by cost bucket (stable: ties in edge order).
-    let mut start = vec![0u32; COST_BUCKETS + 1];
-    for &b in &buckets {
-        if b != SKIP {
-            start[b as usize + 1] += 1;
-        }
-    }
-    for b in 0..COST_BUCKETS {
-        start[b + 1] += start[b];
-    }
-    let mut sorted = vec![0u32; start[COST_BUCKETS] as usize];
-    for (e, &b) in buckets.iter().enumerate() {
-        if b != SKIP {
-            let f = &mut start[b as usize];
-            sorted[*f as usize] = e as u32;
-            *f += 1;
-        }
-    }
+    let (_, sorted) = group_by_key(buckets.len(), COST_BUCKETS, |e| {
+        (buckets[e] != SKIP).then_some(buckets[e] as usize)
+    });
     drop(buckets);
-    drop(start);
 
     // Ensemble: the full graph decides ties, the two sparser graphs can outvote it.
     let mut ranks = vec![k];
@@ -756,22 +741,7 @@ fn orient(
         .map(|&s| if s < 0 { -1.0 } else { 1.0 })
         .collect();
     drop(score);
-    let mut rev_off = vec![0u32; n + 1];
-    for &j in knn {
-        rev_off[j as usize + 1] += 1;
-    }
-    for i in 0..n {
-        rev_off[i + 1] += rev_off[i];
-    }
-    let mut rev = vec![0u32; m];
-    {
-        let mut fill: Vec<u32> = rev_off[..n].to_vec();
-        for (e, &j) in knn.iter().enumerate() {
-            let f = &mut fill[j as usize];
-            rev[*f as usize] = e as u32;
-            *f += 1;
-        }
-    }
+    let (rev_off, rev) = group_by_key(knn.len(), n, |e| Some(knn[e] as usize));
     for _ in 0..refine_sweeps {
         let flips: Vec<bool> = (0..n)
             .into_par_iter()
@@ -780,7 +750,7 @@ fn orient(
                 for (r, &j) in knn[i * k..(i + 1) * k].iter().enumerate() {
                     s += dots[i * k + r] * sign[j as usize];
                 }
-                for &e in &rev[rev_off[i] as usize..rev_off[i + 1] as usize] {
+                for &e in &rev[rev_off[i]..rev_off[i + 1]] {
                     s += dots[e as usize] * sign[e as usize / k];
                 }
                 s * sign[i] < 0.0
@@ -921,21 +891,7 @@ fn enclosed_components(
             std::f32::consts::PI * r2 / k as f32 * stride as f32
         })
         .collect();
-    let mut start = vec![0usize; comp_count + 1];
-    for &c in comp {
-        start[c as usize + 1] += 1;
-    }
-    for c in 0..comp_count {
-        start[c + 1] += start[c];
-    }
-    let mut members = vec![0u32; n];
-    {
-        let mut fill = start.clone();
-        for (i, &c) in comp.iter().enumerate() {
-            members[fill[c as usize]] = i as u32;
-            fill[c as usize] += 1;
-        }
-    }
+    let (start, members) = group_by_key(n, comp_count, |i| Some(comp[i] as usize));
     let mut done = vec![false; comp_count];
     for (rank, &c) in by_size.iter().enumerate() {
         done[c] = true;
@@ -985,4 +941,31 @@ fn vote_directions() -> Vec<Vec3> {
         }
     }
     dirs
+}
+
+/// Counting sort: groups the indices `0..len` by `key(i)` (indices whose key is `None` are left
+/// out). `items[offsets[b]..offsets[b + 1]]` lists the indices of bucket `b`, in increasing order.
+fn group_by_key(
+    len: usize,
+    buckets: usize,
+    key: impl Fn(usize) -> Option<usize>,
+) -> (Vec<usize>, Vec<u32>) {
+    let mut offsets = vec![0usize; buckets + 1];
+    for i in 0..len {
+        if let Some(b) = key(i) {
+            offsets[b + 1] += 1;
+        }
+    }
+    for b in 0..buckets {
+        offsets[b + 1] += offsets[b];
+    }
+    let mut items = vec![0u32; offsets[buckets]];
+    let mut fill = offsets[..buckets].to_vec();
+    for i in 0..len {
+        if let Some(b) = key(i) {
+            items[fill[b]] = i as u32;
+            fill[b] += 1;
+        }
+    }
+    (offsets, items)
 }
