@@ -129,17 +129,13 @@ fn frame_alignments(tp: &Pca, cp: &Pca) -> Vec<Quat> {
     let t = Mat3::from_cols(tp.axes[0], tp.axes[1], tp.axes[2]);
     let mut out = Vec::new();
     for swap in [false, true] {
-        let (c1, c2) = if swap {
-            (cp.axes[2], cp.axes[1])
-        } else {
-            (cp.axes[1], cp.axes[2])
-        };
+        // The second axis of the frame; the third follows from the cross product.
+        let c1 = if swap { cp.axes[2] } else { cp.axes[1] };
         for s0 in [1.0f32, -1.0] {
             for s1 in [1.0f32, -1.0] {
                 let a0 = s0 * cp.axes[0];
                 let a1 = s1 * c1;
                 let a2 = a0.cross(a1);
-                let _ = c2;
                 let c = Mat3::from_cols(a0, a1, a2);
                 let r = c * t.transpose();
                 out.push(Quat::from_mat3(&r).normalize());

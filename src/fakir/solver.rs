@@ -272,7 +272,7 @@ impl<'p> Solver<'p> {
                 assignment: &self.assignment,
                 members: &self.members,
                 bones: energy_bones,
-                occupancy: occupancy,
+                occupancy,
             };
             if terms.count() == 0 && terms.occupancy.is_none() {
                 return Ok(0.0);

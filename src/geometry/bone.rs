@@ -241,16 +241,6 @@ impl Bone {
         let [a1, ac, a2] = pb.part_areas();
         a1 + ac + a2
     }
-
-    /// The bone with both spheres moved by `f` and radii scaled by `s`.
-    pub fn map(&self, f: impl Fn(Vec3) -> Vec3, s: f32) -> Bone {
-        Bone {
-            c1: f(self.c1),
-            c2: f(self.c2),
-            r1: self.r1 * s,
-            r2: self.r2 * s,
-        }
-    }
 }
 
 impl PreparedBone {

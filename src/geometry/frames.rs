@@ -23,11 +23,6 @@ pub fn rotation_arc(from: Vec3, to: Vec3) -> Quat {
     Quat::from_axis_angle(axis / s, s.atan2(c))
 }
 
-/// Alias of [`rotation_arc`].
-pub fn rotation_between(from: Vec3, to: Vec3) -> Quat {
-    rotation_arc(from, to)
-}
-
 /// A right-handed orthonormal frame whose X axis is `axis` and whose Y axis is the part of
 /// `reference` orthogonal to it (or of a fallback when `reference` is nearly parallel).
 /// Bones use X as their axis (paper 001 appendix B: "x-axis aligned with c1c2").
