@@ -34,6 +34,7 @@ pub mod error;
 pub mod fakir;
 pub mod geometry;
 pub mod rng;
+pub mod skinning;
 pub mod synth;
 
 /// The one linear-algebra crate of the project: glam, as re-exported by Bevy.

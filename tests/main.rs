@@ -13,4 +13,5 @@ mod cloud_normals;
 mod cloud_ply;
 mod fakir;
 mod geometry_bone;
+mod skinning;
 mod synth;

@@ -159,10 +159,30 @@ impl Skeleton {
 
     /// Forward kinematics: world bones, frames and joints.
     pub fn pose(&self) -> Posed {
+        let mut posed = Posed {
+            bones: Vec::new(),
+            frames: Vec::new(),
+            joints: Vec::new(),
+        };
+        self.pose_into(&mut posed);
+        posed
+    }
+
+    /// [`Skeleton::pose`] into existing buffers (no allocation once they have grown).
+    pub fn pose_into(&self, out: &mut Posed) {
         let t = &self.template;
-        let mut frames = vec![Quat::IDENTITY; t.bones.len()];
-        let mut bones = vec![Bone::new(Vec3::ZERO, 0.0, Vec3::ZERO, 0.0); t.bones.len()];
-        let mut joints = vec![Vec3::ZERO; t.joints.len()];
+        out.frames.clear();
+        out.frames.resize(t.bones.len(), Quat::IDENTITY);
+        out.bones.clear();
+        out.bones
+            .resize(t.bones.len(), Bone::new(Vec3::ZERO, 0.0, Vec3::ZERO, 0.0));
+        out.joints.clear();
+        out.joints.resize(t.joints.len(), Vec3::ZERO);
+        let Posed {
+            bones,
+            frames,
+            joints,
+        } = out;
         joints[t.root] = self.root_position;
         // Bones are stored parents-first.
         for (i, def) in t.bones.iter().enumerate() {
@@ -175,11 +195,6 @@ impl Skeleton {
             frames[i] = f;
             bones[i] = Bone::new(c1, self.bones[i].r1, c2, self.bones[i].r2);
             joints[def.to] = c2;
-        }
-        Posed {
-            bones,
-            frames,
-            joints,
         }
     }
 

@@ -1,0 +1,378 @@
+//! [`Binding`]: every point of a statue attached to its fitted skeleton (Algorithm 2 step 1,
+//! Algorithm 3 step 1), stored as structure-of-arrays and built in parallel.
+//!
+//! Per point: its bone (the bone whose surface is nearest, by signed distance, so points inside
+//! overlapping bones go to the deepest one), its base point `p̃` (orthogonal projection on that
+//! bone) encoded intrinsically ([`super::surface`]), its signed height `h` with
+//! `p = p̃ + h n_p̃`, its normal in the bone frame, its **blend partner** (the neighbouring bone
+//! across the nearer joint, when the base point lies within reach of that bone's bending
+//! weights) with its eq. 3.1 weight, and its baseline parameters ([`super::baseline`]).
+//!
+//! **Joints that bend.** The joint at `c1` of a bone links it to its parent, except between two
+//! bones of the same rigid block. The joint at `c2` used by baseline skinning links a bone to
+//! its chain successor, or to its only child; where a chain branches (shoulders on the spine's
+//! top, hips on the pelvis) the branching bone meets its parent at its own `c1` only.
+//!
+//! **Influence size** `ε'_r` of the joint between `B_p` and `B_k` (thesis §3.2.1):
+//! `ε'_r = 0.2 · max(r_j / 4, min(r_j, l_p − r_p1 − r_j, l_k − r_j − r_k2))` — the thesis'
+//! formula (the joint radius and the gaps between consecutive spheres) with a floor so that
+//! strongly overlapping spheres keep a usable influence. A point is given a partner when its
+//! base point is within `1.5 ε'_r` of the partner's surface (beyond, the Gaussian weight is
+//! below 5·10⁻⁵).
+
+use super::baseline;
+use super::frame::{self, BoneFrame};
+use super::surface::{BoneShape, CAP1, CAP2, CONE, encode};
+use crate::anatomy::{BoneKind, Skeleton};
+use crate::cloud::PointCloud;
+use crate::error::{Error, Result};
+use crate::geometry::Bone;
+use crate::geometry::bone::{Part, PreparedBone};
+use crate::math::{Quat, Vec3};
+use rayon::prelude::*;
+
+/// No partner / no bone.
+pub const NONE: u16 = u16::MAX;
+
+/// Per-bone data of a binding (fitted pose).
+#[derive(Clone, Debug)]
+pub struct BoneBind {
+    /// Parent bone.
+    pub parent: Option<usize>,
+    /// The bone across the joint at `c1` (the parent, unless both are in a rigid block).
+    pub c1_partner: Option<usize>,
+    /// The bone across the joint at `c2` for baseline curves (chain successor or only child).
+    pub c2_partner: Option<usize>,
+    /// Share of this bone's twist change taken by the parent side of the joint at `c1`:
+    /// `1/2` when this bone continues the parent's chain, else `0`.
+    pub parent_share: f32,
+    /// Fitted shape.
+    pub shape: BoneShape,
+    /// Fitted world frame.
+    pub frame: Quat,
+    /// Fitted world `c1`.
+    pub c1: Vec3,
+    /// `ε'_r` of the joint at `c1` (0 without a partner).
+    pub eps: f32,
+}
+
+/// Per-point data, structure of arrays.
+#[derive(Clone, Debug, Default)]
+pub struct PointData {
+    /// Bone index.
+    pub bone: Vec<u16>,
+    /// Part of the base point ([`super::surface::CAP1`], `CONE`, `CAP2`).
+    pub part: Vec<u8>,
+    /// Fraction along the generatrix (cone points).
+    pub s: Vec<f32>,
+    /// Cap direction or cone radial direction, bone-local.
+    pub dir: Vec<Vec3>,
+    /// Signed height above the base point.
+    pub height: Vec<f32>,
+    /// The point's normal, bone-local.
+    pub normal: Vec<Vec3>,
+    /// Fitted world position (LBS / DQS).
+    pub position: Vec<Vec3>,
+    /// Blend partner bone or [`NONE`].
+    pub partner: Vec<u16>,
+    /// Eq. 3.1 weight of the partner (LBS / DQS).
+    pub weight: Vec<f32>,
+    /// Baseline parameter `t` (NaN: the point moves rigidly with its bone's free cap).
+    pub bl_t: Vec<f32>,
+    /// Baseline azimuth `(cos ψ, sin ψ)`, bone-local.
+    pub bl_cs: Vec<[f32; 2]>,
+    /// Baseline height along the detail direction.
+    pub bl_h: Vec<f32>,
+    /// Baseline detail direction at the fitted pose, bone-local.
+    pub bl_n: Vec<Vec3>,
+    /// What the baseline decomposition leaves over (bone-local; usually tiny).
+    pub bl_res: Vec<Vec3>,
+}
+
+/// A statue's points bound to its fitted skeleton.
+#[derive(Clone, Debug)]
+pub struct Binding {
+    pub(crate) fitted: Skeleton,
+    pub(crate) bones: Vec<BoneBind>,
+    pub(crate) points: PointData,
+}
+
+/// One point's binding, before splitting into arrays.
+#[derive(Clone, Copy, Default)]
+struct Rec {
+    bone: u16,
+    part: u8,
+    s: f32,
+    dir: Vec3,
+    height: f32,
+    normal: Vec3,
+    position: Vec3,
+    partner: u16,
+    weight: f32,
+    bl: baseline::PointBaseline,
+}
+
+fn part_code(p: Part) -> u8 {
+    match p {
+        Part::Cap1 => CAP1,
+        Part::Cone => CONE,
+        Part::Cap2 => CAP2,
+    }
+}
+
+/// Checks that `skel` can drive a binding: finite, positive lengths, non-negative radii.
+pub(crate) fn check_skeleton(skel: &Skeleton, what: &str) -> Result<()> {
+    if !skel.root_position.is_finite() || !skel.root_rotation.is_finite() {
+        return Err(Error::input(format!(
+            "{what}: the root placement is not finite"
+        )));
+    }
+    for (i, b) in skel.bones.iter().enumerate() {
+        let name = &skel.template.bones[i].name;
+        if !b.rotation.is_finite() || !(b.rotation.length_squared() > 1e-12) {
+            return Err(Error::input(format!(
+                "{what}: bone '{name}' has an invalid rotation"
+            )));
+        }
+        if !(b.length > 0.0) || !b.length.is_finite() {
+            return Err(Error::input(format!(
+                "{what}: bone '{name}' has length {} (must be positive and finite)",
+                b.length
+            )));
+        }
+        if !(b.r1 >= 0.0) || !(b.r2 >= 0.0) || !b.r1.is_finite() || !b.r2.is_finite() {
+            return Err(Error::input(format!(
+                "{what}: bone '{name}' has radii {} and {} (must be non-negative and finite)",
+                b.r1, b.r2
+            )));
+        }
+    }
+    Ok(())
+}
+
+impl Binding {
+    /// Binds every point of `cloud` to the skeleton `fitted` (the statue's fitted pose).
+    /// Errors: an empty cloud, non-finite coordinates, a skeleton with non-finite or
+    /// non-positive sizes, more than 65,534 bones.
+    pub fn new(cloud: &PointCloud, fitted: &Skeleton) -> Result<Binding> {
+        if cloud.is_empty() {
+            return Err(Error::input("cannot bind an empty point cloud"));
+        }
+        let bad = cloud.positions.iter().filter(|p| !p.is_finite()).count();
+        if bad > 0 {
+            return Err(Error::input(format!(
+                "cannot bind a cloud with {bad} non-finite point(s)"
+            )));
+        }
+        check_skeleton(fitted, "fitted skeleton")?;
+        let t = &fitted.template;
+        if t.bones.len() >= NONE as usize {
+            return Err(Error::input("too many bones for a binding"));
+        }
+        let posed = fitted.pose();
+        let n = t.bones.len();
+        // Per-bone topology.
+        let successor = |k: usize| -> Option<usize> {
+            let (c, i) = t.bones[k].chain?;
+            t.chains[c]
+                .bones
+                .get(i + 1)
+                .copied()
+                .filter(|&s| t.bones[s].parent == Some(k))
+        };
+        let is_block = |k: usize| matches!(t.bones[k].kind, BoneKind::Block);
+        let mut bones: Vec<BoneBind> = (0..n)
+            .map(|k| {
+                let def = &t.bones[k];
+                let c1_partner = def.parent.filter(|&p| !(is_block(p) && is_block(k)));
+                let st = &fitted.bones[k];
+                BoneBind {
+                    parent: def.parent,
+                    c1_partner,
+                    c2_partner: None,
+                    parent_share: match c1_partner {
+                        Some(p) if successor(p) == Some(k) => 0.5,
+                        _ => 0.0,
+                    },
+                    shape: BoneShape::new(st.length, st.r1, st.r2),
+                    frame: posed.frames[k],
+                    c1: posed.bones[k].c1,
+                    eps: 0.0,
+                }
+            })
+            .collect();
+        for k in 0..n {
+            let children: Vec<usize> = t.bones[k]
+                .children
+                .iter()
+                .copied()
+                .filter(|&c| bones[c].c1_partner == Some(k))
+                .collect();
+            bones[k].c2_partner =
+                successor(k)
+                    .filter(|s| children.contains(s))
+                    .or(if children.len() == 1 {
+                        Some(children[0])
+                    } else {
+                        None
+                    });
+            if let Some(p) = bones[k].c1_partner {
+                let rj = fitted.bones[p].r2;
+                let gap_p = fitted.bones[p].length - fitted.bones[p].r1 - rj;
+                let gap_k = fitted.bones[k].length - rj - fitted.bones[k].r2;
+                bones[k].eps = 0.2 * (0.25 * rj).max(rj.min(gap_p).min(gap_k));
+            }
+        }
+        let prepared: Vec<PreparedBone> = posed.bones.iter().map(Bone::prepare).collect();
+        // The fitted pose analysed against itself: the baseline curves at bind time come from
+        // the very code that evaluates them at deform time.
+        let mut frames: Vec<BoneFrame> = Vec::new();
+        frame::analyse(&bones, fitted, fitted, &posed, &mut frames);
+        let normals = cloud.normals.as_deref();
+        let recs: Vec<Rec> = cloud
+            .positions
+            .par_iter()
+            .enumerate()
+            .map(|(i, &p)| {
+                bind_point(
+                    p,
+                    normals.map(|n| n[i]),
+                    &prepared,
+                    &bones,
+                    &frames,
+                    t.bones.as_slice(),
+                )
+            })
+            .collect();
+        let mut points = PointData::default();
+        let m = recs.len();
+        macro_rules! take {
+            ($field:ident) => {
+                points.$field = recs.iter().map(|r| r.$field).collect::<Vec<_>>();
+            };
+        }
+        take!(bone);
+        take!(part);
+        take!(s);
+        take!(dir);
+        take!(height);
+        take!(normal);
+        take!(position);
+        take!(partner);
+        take!(weight);
+        points.bl_t = recs.iter().map(|r| r.bl.t).collect();
+        points.bl_cs = recs.iter().map(|r| r.bl.cs).collect();
+        points.bl_h = recs.iter().map(|r| r.bl.h).collect();
+        points.bl_n = recs.iter().map(|r| r.bl.n).collect();
+        points.bl_res = recs.iter().map(|r| r.bl.res).collect();
+        debug_assert_eq!(points.bone.len(), m);
+        Ok(Binding {
+            fitted: fitted.clone(),
+            bones,
+            points,
+        })
+    }
+
+    /// Number of bound points.
+    pub fn len(&self) -> usize {
+        self.points.bone.len()
+    }
+
+    /// True when no point is bound (never: binding an empty cloud is an error).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The fitted skeleton the binding was made on.
+    pub fn fitted(&self) -> &Skeleton {
+        &self.fitted
+    }
+
+    /// The per-point arrays.
+    pub fn points(&self) -> &PointData {
+        &self.points
+    }
+
+    /// Number of points with a blend partner (in a joint's bending zone).
+    pub fn joint_points(&self) -> usize {
+        self.points.partner.iter().filter(|&&p| p != NONE).count()
+    }
+}
+
+fn bind_point(
+    p: Vec3,
+    normal: Option<Vec3>,
+    prepared: &[PreparedBone],
+    bones: &[BoneBind],
+    frames: &[BoneFrame],
+    defs: &[crate::anatomy::template::BoneDef],
+) -> Rec {
+    // Nearest bone by (fast) signed distance, then the exact projection on it.
+    let mut best = 0;
+    let mut best_d = f32::INFINITY;
+    for (k, pb) in prepared.iter().enumerate() {
+        let d = pb.sdf_fast(p);
+        if d < best_d {
+            best_d = d;
+            best = k;
+        }
+    }
+    let k = best;
+    let proj = prepared[k].project(p);
+    let bb = &bones[k];
+    let inv = bb.frame.inverse();
+    let b_loc = inv * (proj.point - bb.c1);
+    let n_loc = (inv * proj.normal).normalize_or(Vec3::X);
+    let part = part_code(proj.part);
+    let (s, dir) = encode(&bb.shape, part, b_loc, n_loc);
+    let height = (p - proj.point).dot(proj.normal);
+    let point_normal = normal
+        .filter(|n| n.is_finite() && n.length_squared() > 1e-12)
+        .map(|n| (inv * n).normalize())
+        .unwrap_or(n_loc);
+    // Blend partner: the neighbour across a joint whose surface is nearest the base point.
+    let mut partner = NONE;
+    let mut weight = 0.0;
+    let mut best_m: Option<(usize, f32, f32)> = None;
+    let mut consider = |m: usize, eps: f32| {
+        if eps <= 0.0 {
+            return;
+        }
+        let d = prepared[m].sdf_fast(proj.point).max(0.0);
+        if d < 1.5 * eps && best_m.is_none_or(|(_, bd, _)| d < bd) {
+            best_m = Some((m, d, eps));
+        }
+    };
+    if let Some(pp) = bb.c1_partner {
+        consider(pp, bb.eps);
+    }
+    for &c in &defs[k].children {
+        if bones[c].c1_partner == Some(k) {
+            consider(c, bones[c].eps);
+        }
+    }
+    if let Some((m, d, eps)) = best_m {
+        partner = m as u16;
+        let sigma = eps / 3.0;
+        // Eq. 3.1 with the own bone at distance 0.
+        let g = (-(d * d) / (2.0 * sigma * sigma)).exp();
+        weight = g / (1.0 + g);
+    }
+    let bl = baseline::bind(k, part, b_loc, p_local(p, bb), frames, bones);
+    Rec {
+        bone: k as u16,
+        part,
+        s,
+        dir,
+        height,
+        normal: point_normal,
+        position: p,
+        partner,
+        weight,
+        bl,
+    }
+}
+
+fn p_local(p: Vec3, bb: &BoneBind) -> Vec3 {
+    bb.frame.inverse() * (p - bb.c1)
+}

@@ -1,0 +1,288 @@
+//! Point-set skinning (`src/skinning`): measured properties on synthetic statues whose
+//! skeletons are known exactly (no registration error in the way).
+
+use pygmalion::anatomy::{Skeleton, Template};
+use pygmalion::cloud::PointCloud;
+use pygmalion::math::{Quat, Vec3};
+use pygmalion::skinning::{Binding, Method, Scratch};
+use pygmalion::synth::{SynthOptions, chain_template, generate};
+use std::sync::Arc;
+
+/// A synthetic human in a random pose with some relief (heights ≠ 0), height 1.
+fn human(seed: u64, points: usize) -> (PointCloud, Skeleton) {
+    let t = Arc::new(Template::builtin("human").unwrap());
+    let s = generate(
+        t,
+        &SynthOptions {
+            points,
+            seed,
+            noise_sigma: 0.004,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    (s.cloud, s.truth)
+}
+
+/// A straight two-bone limb along +X (lengths 1, 1; radii 0.25, 0.22, 0.18) with relief.
+fn limb(points: usize) -> (PointCloud, Skeleton) {
+    let t = Arc::new(chain_template("limb", &[1.0, 1.0], &[0.25, 0.22, 0.18]).unwrap());
+    let s = generate(
+        t.clone(),
+        &SynthOptions {
+            points,
+            seed: 7,
+            random_pose: false,
+            proportion_jitter: 0.0,
+            height: 1.0,
+            noise_sigma: 0.002,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    // `height` scales the template to unit height; undo it so lengths are 1 and 1.
+    let k = 1.0 / s.truth.bones[0].length;
+    let cloud = PointCloud::with_normals(
+        s.cloud.positions.iter().map(|p| *p * k).collect(),
+        s.cloud.normals.clone().unwrap(),
+    );
+    let mut skel = s.truth.clone();
+    skel.scale_sizes(k);
+    skel.root_position *= k;
+    (cloud, skel)
+}
+
+fn max_dist(a: &[Vec3], b: &[Vec3]) -> f32 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (*x - *y).length())
+        .fold(0.0, f32::max)
+}
+
+/// The child bone of the limb rotated by the world rotation `q` about the elbow.
+fn rotate_child(skel: &Skeleton, q: Quat) -> Skeleton {
+    let parent = skel.pose().frames[0];
+    let local = (parent.inverse() * q * parent).normalize();
+    let mut s = skel.clone();
+    s.bones[1].rotation = (local * s.bones[1].rotation).normalize();
+    s
+}
+
+#[test]
+fn fitted_pose_gives_every_point_back() {
+    let (cloud, skel) = human(3, 20_000);
+    let bind = Binding::new(&cloud, &skel).unwrap();
+    assert_eq!(bind.len(), cloud.len());
+    for m in Method::ALL {
+        let out = bind.deform_cloud(&skel, m).unwrap();
+        let d = max_dist(&out.positions, &cloud.positions);
+        assert!(d <= 1e-5, "{m}: a point moved by {d} (height 1)");
+    }
+}
+
+#[test]
+fn rigid_motion_of_the_skeleton_moves_the_cloud_rigidly() {
+    let (cloud, skel) = human(5, 20_000);
+    let bind = Binding::new(&cloud, &skel).unwrap();
+    let q = Quat::from_axis_angle(Vec3::new(0.3, 1.0, -0.2).normalize(), 1.1);
+    let t = Vec3::new(0.4, -2.0, 0.7);
+    let mut moved = skel.clone();
+    moved.transform_rigid(q, t);
+    let expect: Vec<Vec3> = cloud.positions.iter().map(|p| q * *p + t).collect();
+    for m in Method::ALL {
+        let out = bind.deform_cloud(&moved, m).unwrap();
+        let d = max_dist(&out.positions, &expect);
+        assert!(d <= 1e-5 * 2.0, "{m}: off a rigid motion by {d}");
+        let nd = out
+            .normals
+            .as_ref()
+            .unwrap()
+            .iter()
+            .zip(cloud.normals.as_ref().unwrap())
+            .map(|(a, b)| (*a - q * *b).length())
+            .fold(0.0, f32::max);
+        assert!(nd <= 1e-4, "{m}: normals off a rigid motion by {nd}");
+    }
+}
+
+fn seg_dist(p: Vec3, a: Vec3, b: Vec3) -> f32 {
+    let ab = b - a;
+    let t = ((p - a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0);
+    (p - (a + t * ab)).length()
+}
+
+/// The bend test of the issue: a 90° elbow bend about Z (the child turns towards +Y, so the
+/// convex side is −Y). "Keeping the convex side" is measured as each convex-side point's
+/// distance to the skeleton (the two bones' axes), rest against bent: a collapsing joint thins
+/// there, while points that merely slide along the limb (baseline skinning stretches its
+/// baselines over the opened joint) keep it.
+#[test]
+fn elbow_bend_keeps_the_convex_side_and_lbs_collapses() {
+    let (cloud, skel) = limb(20_000);
+    let bind = Binding::new(&cloud, &skel).unwrap();
+    let target = rotate_child(&skel, Quat::from_rotation_z(std::f32::consts::FRAC_PI_2));
+    let j = Vec3::X; // the elbow
+    let tip_rest = 2.0 * Vec3::X;
+    let tip_bent = j + Vec3::Y;
+    let mut ratios = Vec::new();
+    for m in Method::ALL {
+        let out = bind.deform_cloud(&target, m).unwrap();
+        assert!(out.positions.iter().all(|p| p.is_finite()), "{m}: NaN");
+        // Convex side near the joint: rest points with y < −0.1 within 0.3 of the elbow.
+        let mut worst = f32::INFINITY;
+        for (p, q) in cloud.positions.iter().zip(&out.positions) {
+            let r = *p - j;
+            if r.y < -0.1 && r.length() < 0.3 {
+                let d0 = seg_dist(*p, Vec3::ZERO, j).min(seg_dist(*p, j, tip_rest));
+                let d1 = seg_dist(*q, Vec3::ZERO, j).min(seg_dist(*q, j, tip_bent));
+                worst = worst.min(d1 / d0);
+            }
+        }
+        ratios.push((m, worst));
+        // Neighbourhoods stay neighbourhoods: the longest 8-NN edge grows by a bounded factor.
+        let grow = knn_growth(&cloud.positions, &out.positions, 8);
+        assert!(grow < 4.0, "{m}: the longest 8-NN edge grew {grow}×");
+    }
+    let get = |m: Method| ratios.iter().find(|r| r.0 == m).unwrap().1;
+    assert!(get(Method::Heightfield) >= 0.9, "{ratios:?}");
+    assert!(get(Method::Baseline) >= 0.9, "{ratios:?}");
+    assert!(get(Method::Lbs) < 0.85, "LBS should collapse: {ratios:?}");
+}
+
+/// Longest k-NN edge of the deformed cloud over the longest of the rest cloud, the neighbours
+/// being taken in the rest cloud (brute force on a subsample).
+fn knn_growth(rest: &[Vec3], moved: &[Vec3], k: usize) -> f32 {
+    let idx: Vec<usize> = (0..rest.len()).step_by(7).collect();
+    let (mut l0, mut l1) = (0.0f32, 0.0f32);
+    for &i in &idx {
+        let mut d: Vec<(f32, usize)> = idx
+            .iter()
+            .filter(|&&j| j != i)
+            .map(|&j| ((rest[i] - rest[j]).length_squared(), j))
+            .collect();
+        d.select_nth_unstable_by(k, |a, b| a.0.total_cmp(&b.0));
+        for &(_, j) in &d[..k] {
+            l0 = l0.max((rest[i] - rest[j]).length());
+            l1 = l1.max((moved[i] - moved[j]).length());
+        }
+    }
+    l1 / l0
+}
+
+/// The candy-wrapper test: a 90° twist of the child about its own axis.
+#[test]
+fn twist_keeps_the_cross_section_and_lbs_pinches() {
+    let (cloud, skel) = limb(20_000);
+    let bind = Binding::new(&cloud, &skel).unwrap();
+    let target = rotate_child(&skel, Quat::from_rotation_x(std::f32::consts::FRAC_PI_2));
+    let mut res = Vec::new();
+    for m in Method::ALL {
+        let out = bind.deform_cloud(&target, m).unwrap();
+        // Radius about the limb's axis (X) of the points of the cone parts, relative to rest.
+        let mut worst = f32::INFINITY;
+        for (p, q) in cloud.positions.iter().zip(&out.positions) {
+            if (p.x - 0.5).abs() < 1.0 {
+                let r0 = Vec3::new(0.0, p.y, p.z).length();
+                let r1 = Vec3::new(0.0, q.y, q.z).length();
+                worst = worst.min(r1 / r0);
+            }
+        }
+        res.push((m, worst));
+    }
+    let get = |m: Method| res.iter().find(|r| r.0 == m).unwrap().1;
+    assert!(get(Method::Heightfield) >= 0.9, "{res:?}");
+    assert!(get(Method::Baseline) >= 0.9, "{res:?}");
+    assert!(get(Method::Lbs) < 0.85, "LBS should pinch: {res:?}");
+}
+
+#[test]
+fn lengthening_a_bone_moves_the_distal_points_by_as_much() {
+    let (cloud, skel) = limb(10_000);
+    let bind = Binding::new(&cloud, &skel).unwrap();
+    let mut target = skel.clone();
+    target.bones[0].length *= 1.3;
+    for m in [Method::Baseline, Method::Heightfield] {
+        let out = bind.deform_cloud(&target, m).unwrap();
+        // Points well inside the distal bone move by +0.3 along the limb.
+        let mut worst = 0.0f32;
+        for (p, q) in cloud.positions.iter().zip(&out.positions) {
+            if p.x > 1.5 {
+                worst = worst.max((*q - (*p + Vec3::new(0.3, 0.0, 0.0))).length());
+            }
+        }
+        assert!(worst < 1e-3, "{m}: distal points off by {worst}");
+    }
+}
+
+#[test]
+fn scaling_the_radii_scales_the_heights() {
+    let (cloud, skel) = limb(10_000);
+    let bind = Binding::new(&cloud, &skel).unwrap();
+    let mut target = skel.clone();
+    for b in &mut target.bones {
+        b.r1 *= 1.5;
+        b.r2 *= 1.5;
+    }
+    for m in [Method::Baseline, Method::Heightfield] {
+        let out = bind.deform_cloud(&target, m).unwrap();
+        let mut worst = 0.0f32;
+        for (p, q) in cloud.positions.iter().zip(&out.positions) {
+            if (p.x - 0.5).abs() < 0.3 || (p.x - 1.5).abs() < 0.3 {
+                let r0 = Vec3::new(0.0, p.y, p.z).length();
+                let r1 = Vec3::new(0.0, q.y, q.z).length();
+                worst = worst.max((r1 / r0 - 1.5).abs());
+            }
+        }
+        assert!(worst < 0.02, "{m}: radius ratio off 1.5 by {worst}");
+    }
+}
+
+#[test]
+fn deform_is_deterministic_and_checks_its_inputs() {
+    let (cloud, skel) = human(11, 8_000);
+    let bind = Binding::new(&cloud, &skel).unwrap();
+    let mut target = skel.clone();
+    for b in target.bones.iter_mut().skip(3) {
+        b.rotation = (Quat::from_rotation_z(0.3) * b.rotation).normalize();
+    }
+    for m in Method::ALL {
+        let a = bind.deform_cloud(&target, m).unwrap();
+        let b = bind.deform_cloud(&target, m).unwrap();
+        let bits = |c: &PointCloud| -> Vec<u32> {
+            c.positions
+                .iter()
+                .flat_map(|p| p.to_array())
+                .map(f32::to_bits)
+                .collect()
+        };
+        assert_eq!(bits(&a), bits(&b), "{m}");
+    }
+    // Bad inputs.
+    let mut nan = skel.clone();
+    nan.bones[4].length = f32::NAN;
+    let err = bind
+        .deform_cloud(&nan, Method::Baseline)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("length"), "{err}");
+    let mut pos = vec![Vec3::ZERO; 3];
+    let mut nrm = vec![Vec3::ZERO; 3];
+    let err = bind
+        .deform(
+            &skel,
+            Method::Lbs,
+            &mut Scratch::default(),
+            &mut pos,
+            &mut nrm,
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("buffers"), "{err}");
+    let empty = PointCloud::from_positions(Vec::new());
+    assert!(Binding::new(&empty, &skel).is_err());
+    let bad = PointCloud::from_positions(vec![Vec3::new(f32::NAN, 0.0, 0.0)]);
+    let err = Binding::new(&bad, &skel).unwrap_err().to_string();
+    assert!(err.contains("non-finite"), "{err}");
+    assert!("dqs".parse::<Method>().is_ok());
+    assert!("bogus".parse::<Method>().is_err());
+}
