@@ -7,6 +7,7 @@
 //! | `normals IN OUT [--k 16]` | (re-)estimates oriented normals, points kept in input order |
 //! | `synth OUT.ply [--template human] [--seed N] ...` | a synthetic statue with ground truth |
 //! | `register IN.ply [--template human] [--anchor x,y,z] [--up y] [--out FIT.json] [--labels OUT.ply]` | FAKIR registration |
+//! | `repose IN.ply FIT.json POSE [--method baseline] [--proportions FILE] --out OUT.ply` | re-poses a registered statue by point-set skinning (see [`crate::anatomy::pose`], [`crate::skinning`]) |
 //! | `bench [--json] [--only PREFIX]` | the benchmarks (see [`crate::bench`]) |
 
 use crate::anatomy::Template;
@@ -17,6 +18,7 @@ use crate::synth::{Cut, SynthOptions, generate};
 use clap::{Parser, Subcommand};
 
 mod register;
+mod repose;
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -120,6 +122,31 @@ enum Command {
         #[arg(long)]
         drop_non_finite: bool,
     },
+    /// Re-poses a registered statue by point-set skinning and writes the re-posed cloud.
+    Repose {
+        /// The statue (PLY); normals are estimated when the file has none.
+        input: PathBuf,
+        /// The fitted skeleton (JSON written by `register --out`).
+        fit: PathBuf,
+        /// A built-in pose (identity, rest, contrapposto, arms_raised, walking, seated,
+        /// thinker) or a pose file (RON, see config/poses/).
+        pose: String,
+        /// Skinning method: baseline, heightfield, lbs or dqs.
+        #[arg(long, default_value = "baseline")]
+        method: String,
+        /// A proportions file (RON, see src/anatomy/pose.rs).
+        #[arg(long)]
+        proportions: Option<PathBuf>,
+        /// Template name or file, when the fit's template is not built in.
+        #[arg(long)]
+        template: Option<String>,
+        /// Write the re-posed cloud here (PLY).
+        #[arg(long)]
+        out: PathBuf,
+        /// Drop points with NaN/inf coordinates instead of refusing the file.
+        #[arg(long)]
+        drop_non_finite: bool,
+    },
     /// Runs the benchmarks.
     Bench {
         /// One JSON object per line.
@@ -213,6 +240,25 @@ where
             labels.as_deref(),
             drop_non_finite,
         ),
+        Command::Repose {
+            input,
+            fit,
+            pose,
+            method,
+            proportions,
+            template,
+            out,
+            drop_non_finite,
+        } => repose::run(&repose::Args {
+            input: &input,
+            fit: &fit,
+            pose: &pose,
+            method: &method,
+            proportions: proportions.as_deref(),
+            template: template.as_deref(),
+            out: &out,
+            drop_non_finite,
+        }),
         Command::Bench { json, only, runs } => crate::bench::run_cli(json, only.as_deref(), runs),
     }
 }
