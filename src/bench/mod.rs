@@ -14,6 +14,7 @@
 
 mod core;
 mod fakir;
+mod skin;
 
 use crate::error::Result;
 use serde::Serialize;
@@ -46,6 +47,7 @@ pub struct Entry {
 pub fn entries() -> Vec<Entry> {
     let mut e = core::entries();
     e.extend(fakir::entries());
+    e.extend(skin::entries());
     e
 }
 
