@@ -77,16 +77,17 @@ pub struct PointData {
     pub partner: Vec<u16>,
     /// Eq. 3.1 weight of the partner (LBS / DQS).
     pub weight: Vec<f32>,
-    /// Baseline parameter `t` (NaN: the point moves rigidly with its bone's free cap).
-    pub bl_t: Vec<f32>,
-    /// Baseline azimuth `(cos ψ, sin ψ)`, bone-local.
-    pub bl_cs: Vec<[f32; 2]>,
+    /// Baseline grid cell ([`super::baseline::NO_CELL`]: the point moves rigidly with its
+    /// bone — free caps, or far past a key point).
+    pub bl_cell: Vec<u32>,
+    /// Bilinear fractions in the baseline grid cell.
+    pub bl_uv: Vec<[f32; 2]>,
     /// Baseline height along the detail direction.
     pub bl_h: Vec<f32>,
-    /// Baseline detail direction at the fitted pose, bone-local.
-    pub bl_n: Vec<Vec3>,
-    /// What the baseline decomposition leaves over (bone-local; usually tiny).
+    /// What the baseline decomposition leaves over, in the detail frame (usually tiny).
     pub bl_res: Vec<Vec3>,
+    /// The point's normal in the baseline detail frame.
+    pub bl_n: Vec<Vec3>,
 }
 
 /// A statue's points bound to its fitted skeleton.
@@ -95,6 +96,8 @@ pub struct Binding {
     pub(crate) fitted: Skeleton,
     pub(crate) bones: Vec<BoneBind>,
     pub(crate) points: PointData,
+    /// Detail directions of the baseline grid at the fitted pose.
+    pub(crate) fit_grid_normals: Vec<Vec3>,
 }
 
 /// One point's binding, before splitting into arrays.
@@ -228,6 +231,9 @@ impl Binding {
         // the very code that evaluates them at deform time.
         let mut frames: Vec<BoneFrame> = Vec::new();
         frame::analyse(&bones, fitted, fitted, &posed, &mut frames);
+        let mut tables = baseline::Tables::default();
+        baseline::build_tables(&frames, &bones, None, &mut tables);
+        let fit_grid_normals = tables.grid_normals();
         let normals = cloud.normals.as_deref();
         let recs: Vec<Rec> = cloud
             .positions
@@ -239,7 +245,7 @@ impl Binding {
                     normals.map(|n| n[i]),
                     &prepared,
                     &bones,
-                    &frames,
+                    &tables,
                     t.bones.as_slice(),
                 )
             })
@@ -260,8 +266,8 @@ impl Binding {
         take!(position);
         take!(partner);
         take!(weight);
-        points.bl_t = recs.iter().map(|r| r.bl.t).collect();
-        points.bl_cs = recs.iter().map(|r| r.bl.cs).collect();
+        points.bl_cell = recs.iter().map(|r| r.bl.cell).collect();
+        points.bl_uv = recs.iter().map(|r| r.bl.uv).collect();
         points.bl_h = recs.iter().map(|r| r.bl.h).collect();
         points.bl_n = recs.iter().map(|r| r.bl.n).collect();
         points.bl_res = recs.iter().map(|r| r.bl.res).collect();
@@ -270,6 +276,7 @@ impl Binding {
             fitted: fitted.clone(),
             bones,
             points,
+            fit_grid_normals,
         })
     }
 
@@ -304,7 +311,7 @@ fn bind_point(
     normal: Option<Vec3>,
     prepared: &[PreparedBone],
     bones: &[BoneBind],
-    frames: &[BoneFrame],
+    tables: &baseline::Tables,
     defs: &[crate::anatomy::template::BoneDef],
 ) -> Rec {
     // Nearest bone by (fast) signed distance, then the exact projection on it.
@@ -358,7 +365,16 @@ fn bind_point(
         let g = (-(d * d) / (2.0 * sigma * sigma)).exp();
         weight = g / (1.0 + g);
     }
-    let bl = baseline::bind(k, part, b_loc, p_local(p, bb), frames, bones);
+    let world_normal = bb.frame * point_normal;
+    let bl = baseline::bind(
+        k,
+        part,
+        b_loc,
+        p_local(p, bb),
+        (p, world_normal),
+        bones,
+        tables,
+    );
     Rec {
         bone: k as u16,
         part,

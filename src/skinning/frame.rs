@@ -25,6 +25,8 @@ use std::f32::consts::PI;
 pub struct BoneFrame {
     /// New world frame `F'_k` (columns: bone X, Y, Z).
     pub rot: Mat3,
+    /// The same as a quaternion.
+    pub rot_q: Quat,
     /// New world position of `c1`.
     pub origin: Vec3,
     /// New shape (length, radii).
@@ -127,6 +129,7 @@ pub fn analyse(
         };
         out[k] = BoneFrame {
             rot: Mat3::from_quat(q_new),
+            rot_q: q_new,
             origin,
             shape,
             radius_ratio: [ratio(st.r1, bb.shape.r1), ratio(st.r2, bb.shape.r2)],

@@ -109,6 +109,7 @@ impl FromStr for Method {
 pub struct Scratch {
     posed: Option<Posed>,
     frames: Vec<BoneFrame>,
+    tables: baseline::Tables,
     joint_bones: Vec<heightfield::JointBones>,
 }
 
@@ -171,7 +172,16 @@ impl Binding {
         match method {
             Method::Lbs => run(op, on, |i| blend::lbs_point(i, pts, frames)),
             Method::Dqs => run(op, on, |i| blend::dqs_point(i, pts, frames)),
-            Method::Baseline => run(op, on, |i| baseline::deform_point(i, pts, frames, bones)),
+            Method::Baseline => {
+                baseline::build_tables(
+                    frames,
+                    bones,
+                    Some(&self.fit_grid_normals),
+                    &mut scratch.tables,
+                );
+                let tb = &scratch.tables;
+                run(op, on, |i| baseline::deform_point(i, pts, frames, tb))
+            }
             Method::Heightfield => {
                 heightfield::prepare(bones, frames, &mut scratch.joint_bones);
                 let jb = &scratch.joint_bones;
