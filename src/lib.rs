@@ -17,6 +17,7 @@
 //! | [`cloud`] | [`cloud::PointCloud`] (structure of arrays), PLY in/out ([`cloud::ply`]), normal estimation ([`cloud::normals`]) |
 //! | [`geometry`] | the sphere-mesh bone ([`geometry::Bone`]): orthogonal and normal-constrained projection, distances, surface sampling |
 //! | [`anatomy`] | templates loaded from `config/templates/`, the skeleton state, forward kinematics, fitted-skeleton JSON |
+//! | [`render`] | a software point-cloud renderer ([`render::render`]: splats, z-buffer, eye-dome lighting), [`render::Camera`], overlays, PNG output ([`render::Image`]) |
 //! | [`synth`] | synthetic statues with ground truth (tests and benches) |
 //! | [`bench`] | the `pygmalion bench` harness |
 //!
@@ -33,6 +34,7 @@ pub mod cloud;
 pub mod error;
 pub mod fakir;
 pub mod geometry;
+pub mod render;
 pub mod rng;
 pub mod skinning;
 pub mod synth;

@@ -14,5 +14,6 @@ mod cloud_normals;
 mod cloud_ply;
 mod fakir;
 mod geometry_bone;
+mod render;
 mod skinning;
 mod synth;
