@@ -130,3 +130,133 @@ fn bad_input_is_an_error_naming_the_file() {
     assert!(e.contains("no benchmark"), "{e}");
     assert!(run(args(&["no-such-command"])).is_err());
 }
+
+/// `repose`, `picture` and `film` on a synthetic statue with its true skeleton: the outputs
+/// exist with the promised sizes, the identity pose gives the points back, and bad requests
+/// are refused before anything is written.
+#[test]
+fn repose_picture_and_film_write_what_they_promise() {
+    let dir = crate::common::scratch("cli_repose");
+    let synth = dir.join("synth.ply");
+    let truth = dir.join("truth.json");
+    run(args(&[
+        "synth",
+        synth.to_str().unwrap(),
+        "--seed",
+        "4",
+        "--points",
+        "4000",
+        "--rest",
+        "--truth",
+        truth.to_str().unwrap(),
+    ]))
+    .unwrap();
+    let (s, t) = (synth.to_str().unwrap(), truth.to_str().unwrap());
+    let same = dir.join("same.ply");
+    run(args(&[
+        "repose",
+        s,
+        t,
+        "identity",
+        "--out",
+        same.to_str().unwrap(),
+    ]))
+    .unwrap();
+    let a = pygmalion::cloud::ply::read_ply(&synth).unwrap();
+    let b = pygmalion::cloud::ply::read_ply(&same).unwrap();
+    let moved = a
+        .positions
+        .iter()
+        .zip(&b.positions)
+        .map(|(p, q)| (*p - *q).length())
+        .fold(0.0f32, f32::max);
+    assert!(moved < 1e-5, "identity pose moved a point by {moved}");
+
+    let pic = dir.join("cmp.png");
+    run(args(&[
+        "picture",
+        s,
+        "--fit",
+        t,
+        "--pose",
+        "greeting",
+        "--out",
+        pic.to_str().unwrap(),
+        "--width",
+        "120",
+        "--height",
+        "200",
+    ]))
+    .unwrap();
+    let img = pygmalion::render::Image::load_png(&pic).unwrap();
+    // Five panels (statue + four methods) of 120 px with 8 px gaps.
+    assert_eq!((img.width, img.height), (5 * 120 + 4 * 8, 200));
+    let lit = img.rgb.chunks(3).filter(|c| c[0] > 120).count();
+    assert!(
+        lit > 5 * 300,
+        "the panels show the statue ({lit} lit pixels)"
+    );
+
+    let film = dir.join("film");
+    run(args(&[
+        "film",
+        s,
+        t,
+        "greeting",
+        "--out",
+        film.to_str().unwrap(),
+        "--frames",
+        "3",
+        "--width",
+        "64",
+        "--height",
+        "96",
+    ]))
+    .unwrap();
+    for f in 0..3 {
+        assert!(film.join(format!("frame_{f:04}.png")).is_file());
+    }
+
+    // Bad requests: a pose without a fit, an unknown method, zero frames.
+    let bad = dir.join("bad.png");
+    assert!(
+        run(args(&[
+            "picture",
+            s,
+            "--pose",
+            "greeting",
+            "--out",
+            bad.to_str().unwrap()
+        ]))
+        .is_err()
+    );
+    let err = run(args(&[
+        "picture",
+        s,
+        "--fit",
+        t,
+        "--pose",
+        "greeting",
+        "--method",
+        "wobble",
+        "--out",
+        bad.to_str().unwrap(),
+    ]))
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("wobble"), "{err}");
+    assert!(
+        run(args(&[
+            "film",
+            s,
+            t,
+            "greeting",
+            "--out",
+            film.to_str().unwrap(),
+            "--frames",
+            "0"
+        ]))
+        .is_err()
+    );
+    assert!(!bad.exists());
+}

@@ -116,7 +116,7 @@ pub struct Pose {
 }
 
 /// The built-in pose files (`config/poses/NAME.ron`), compiled in.
-const BUILTIN_POSE_FILES: [(&str, &str); 6] = [
+const BUILTIN_POSE_FILES: [(&str, &str); 7] = [
     ("rest", include_str!("../../config/poses/rest.ron")),
     (
         "contrapposto",
@@ -129,10 +129,11 @@ const BUILTIN_POSE_FILES: [(&str, &str); 6] = [
     ("walking", include_str!("../../config/poses/walking.ron")),
     ("seated", include_str!("../../config/poses/seated.ron")),
     ("thinker", include_str!("../../config/poses/thinker.ron")),
+    ("greeting", include_str!("../../config/poses/greeting.ron")),
 ];
 
 /// Every built-in pose name: `identity` and the files of `config/poses/`.
-const BUILTIN_POSE_NAMES: [&str; 7] = [
+const BUILTIN_POSE_NAMES: [&str; 8] = [
     "identity",
     "rest",
     "contrapposto",
@@ -140,6 +141,7 @@ const BUILTIN_POSE_NAMES: [&str; 7] = [
     "walking",
     "seated",
     "thinker",
+    "greeting",
 ];
 
 /// RON with `implicit_some`: files write `direction: (0, 1, 0)` rather than

@@ -8,6 +8,8 @@
 //! | `synth OUT.ply [--template human] [--seed N] ...` | a synthetic statue with ground truth |
 //! | `register IN.ply [--template human] [--anchor x,y,z] [--up y] [--out FIT.json] [--labels OUT.ply]` | FAKIR registration |
 //! | `repose IN.ply FIT.json POSE [--method baseline] [--proportions FILE] --out OUT.ply` | re-poses a registered statue by point-set skinning (see [`crate::anatomy::pose`], [`crate::skinning`]) |
+//! | `picture IN.ply --out OUT.png [--fit FIT.json] [--bones] [--pose POSE] [--method M\|all]` | a CPU-rendered picture; with a pose, one panel per method |
+//! | `film IN.ply FIT.json POSE --out DIR [--frames N] [--method M] [--orbit DEG]` | PNG frames of the statue moving into a pose |
 //! | `bench [--json] [--only PREFIX]` | the benchmarks (see [`crate::bench`]) |
 
 use crate::anatomy::Template;
@@ -17,6 +19,7 @@ use crate::error::{Error, Result};
 use crate::synth::{Cut, SynthOptions, generate};
 use clap::{Parser, Subcommand};
 
+mod picture;
 mod register;
 mod repose;
 use std::ffi::OsString;
@@ -147,6 +150,66 @@ enum Command {
         #[arg(long)]
         drop_non_finite: bool,
     },
+    /// A picture of a statue (CPU renderer): with --fit and --bones its fitted bones, with
+    /// --pose the statue re-posed by one method or by all of them side by side.
+    Picture {
+        input: PathBuf,
+        /// The PNG to write.
+        #[arg(long)]
+        out: PathBuf,
+        /// The fitted skeleton (JSON from `register --out`).
+        #[arg(long)]
+        fit: Option<PathBuf>,
+        /// A built-in pose or a pose file (needs --fit).
+        #[arg(long)]
+        pose: Option<String>,
+        /// Skinning method, or `all` for a panel per method.
+        #[arg(long, default_value = "all")]
+        method: String,
+        /// Draw the bones over the statue (needs --fit).
+        #[arg(long)]
+        bones: bool,
+        /// Template name or file, when the fit's template is not built in.
+        #[arg(long)]
+        template: Option<String>,
+        /// Width of each panel in pixels.
+        #[arg(long, default_value_t = 420)]
+        width: u32,
+        /// Height of each panel in pixels.
+        #[arg(long, default_value_t = 720)]
+        height: u32,
+        /// Turn the camera about the statue's up axis by this many degrees.
+        #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+        turn: f32,
+    },
+    /// A short film (PNG frames) of a statue moving from its fitted pose to a pose.
+    Film {
+        input: PathBuf,
+        fit: PathBuf,
+        /// A built-in pose or a pose file.
+        pose: String,
+        /// Skinning method.
+        #[arg(long, default_value = "baseline")]
+        method: String,
+        /// Folder for frame_0000.png, frame_0001.png, …
+        #[arg(long)]
+        out: PathBuf,
+        /// Number of frames.
+        #[arg(long, default_value_t = 48)]
+        frames: usize,
+        /// Turn of the camera over the film, degrees.
+        #[arg(long, default_value_t = 30.0, allow_hyphen_values = true)]
+        orbit: f32,
+        /// Template name or file, when the fit's template is not built in.
+        #[arg(long)]
+        template: Option<String>,
+        /// Frame width in pixels.
+        #[arg(long, default_value_t = 640)]
+        width: u32,
+        /// Frame height in pixels.
+        #[arg(long, default_value_t = 720)]
+        height: u32,
+    },
     /// Runs the benchmarks.
     Bench {
         /// One JSON object per line.
@@ -258,6 +321,52 @@ where
             template: template.as_deref(),
             out: &out,
             drop_non_finite,
+        }),
+        Command::Picture {
+            input,
+            out,
+            fit,
+            pose,
+            method,
+            bones,
+            template,
+            width,
+            height,
+            turn,
+        } => picture::run_picture(&picture::PictureArgs {
+            input: &input,
+            out: &out,
+            fit: fit.as_deref(),
+            pose: pose.as_deref(),
+            method: &method,
+            bones,
+            template: template.as_deref(),
+            width,
+            height,
+            turn_deg: turn,
+        }),
+        Command::Film {
+            input,
+            fit,
+            pose,
+            method,
+            out,
+            frames,
+            orbit,
+            template,
+            width,
+            height,
+        } => picture::run_film(&picture::FilmArgs {
+            input: &input,
+            fit: &fit,
+            pose: &pose,
+            method: &method,
+            out_dir: &out,
+            frames,
+            orbit_deg: orbit,
+            template: template.as_deref(),
+            width,
+            height,
         }),
         Command::Bench { json, only, runs } => crate::bench::run_cli(json, only.as_deref(), runs),
     }
