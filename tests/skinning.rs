@@ -286,3 +286,44 @@ fn deform_is_deterministic_and_checks_its_inputs() {
     assert!("dqs".parse::<Method>().is_ok());
     assert!("bogus".parse::<Method>().is_err());
 }
+
+#[test]
+fn a_saved_binding_loads_back_and_deforms_identically() {
+    let (cloud, skel) = human(13, 6_000);
+    let bind = Binding::new(&cloud, &skel).unwrap();
+    let dir = crate::common::scratch("skinning_store");
+    let path = dir.join("statue.binding");
+    bind.save(&path).unwrap();
+    let back = Binding::load(&path, skel.template.clone()).unwrap();
+    assert_eq!(back.len(), bind.len());
+    let mut target = skel.clone();
+    for b in target.bones.iter_mut().skip(3) {
+        b.rotation = (Quat::from_rotation_y(0.4) * b.rotation).normalize();
+    }
+    for m in Method::ALL {
+        let a = bind.deform_cloud(&target, m).unwrap();
+        let b = back.deform_cloud(&target, m).unwrap();
+        assert_eq!(a.positions, b.positions, "{m}");
+        assert_eq!(a.normals, b.normals, "{m}");
+    }
+    // Damaged files: each error names the file.
+    let bytes = std::fs::read(&path).unwrap();
+    let cases: Vec<(&str, Vec<u8>)> = vec![
+        ("truncated", bytes[..bytes.len() / 2].to_vec()),
+        ("magic", [b"NOTABIND".as_slice(), &bytes[8..]].concat()),
+        ("trailing", [bytes.as_slice(), &[0u8; 5]].concat()),
+        ("empty", Vec::new()),
+    ];
+    for (name, data) in cases {
+        let p = dir.join(format!("{name}.binding"));
+        std::fs::write(&p, data).unwrap();
+        let err = Binding::load(&p, skel.template.clone())
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(&format!("{name}.binding")), "{name}: {err}");
+    }
+    // Another template is refused.
+    let other = Arc::new(Template::builtin("quadruped").unwrap());
+    let err = Binding::load(&path, other).unwrap_err().to_string();
+    assert!(err.contains("human"), "{err}");
+}

@@ -172,67 +172,7 @@ impl Binding {
         if t.bones.len() >= NONE as usize {
             return Err(Error::input("too many bones for a binding"));
         }
-        let posed = fitted.pose();
-        let n = t.bones.len();
-        // Per-bone topology.
-        let successor = |k: usize| -> Option<usize> {
-            let (c, i) = t.bones[k].chain?;
-            t.chains[c]
-                .bones
-                .get(i + 1)
-                .copied()
-                .filter(|&s| t.bones[s].parent == Some(k))
-        };
-        let is_block = |k: usize| matches!(t.bones[k].kind, BoneKind::Block);
-        let mut bones: Vec<BoneBind> = (0..n)
-            .map(|k| {
-                let def = &t.bones[k];
-                let c1_partner = def.parent.filter(|&p| !(is_block(p) && is_block(k)));
-                let st = &fitted.bones[k];
-                BoneBind {
-                    parent: def.parent,
-                    c1_partner,
-                    c2_partner: None,
-                    parent_share: match c1_partner {
-                        Some(p) if successor(p) == Some(k) => 0.5,
-                        _ => 0.0,
-                    },
-                    shape: BoneShape::new(st.length, st.r1, st.r2),
-                    frame: posed.frames[k],
-                    c1: posed.bones[k].c1,
-                    eps: 0.0,
-                }
-            })
-            .collect();
-        for k in 0..n {
-            let children: Vec<usize> = t.bones[k]
-                .children
-                .iter()
-                .copied()
-                .filter(|&c| bones[c].c1_partner == Some(k))
-                .collect();
-            bones[k].c2_partner =
-                successor(k)
-                    .filter(|s| children.contains(s))
-                    .or(if children.len() == 1 {
-                        Some(children[0])
-                    } else {
-                        None
-                    });
-            if let Some(p) = bones[k].c1_partner {
-                let rj = fitted.bones[p].r2;
-                let gap_p = fitted.bones[p].length - fitted.bones[p].r1 - rj;
-                let gap_k = fitted.bones[k].length - rj - fitted.bones[k].r2;
-                bones[k].eps = 0.2 * (0.25 * rj).max(rj.min(gap_p).min(gap_k));
-            }
-        }
-        let prepared: Vec<PreparedBone> = posed.bones.iter().map(Bone::prepare).collect();
-        // The fitted pose analysed against itself: the baseline curves at bind time come from
-        // the very code that evaluates them at deform time.
-        let mut frames: Vec<BoneFrame> = Vec::new();
-        frame::analyse(&bones, fitted, fitted, &posed, &mut frames);
-        let mut tables = baseline::Tables::default();
-        baseline::build_tables(&frames, &bones, None, &mut tables);
+        let (bones, prepared, tables) = prepare(fitted);
         let fit_grid_normals = tables.grid_normals();
         let normals = cloud.normals.as_deref();
         let recs: Vec<Rec> = cloud
@@ -280,6 +220,18 @@ impl Binding {
         })
     }
 
+    /// A binding from a fitted skeleton and its per-point arrays (the per-bone part and the
+    /// baseline tables are recomputed from the skeleton).
+    pub(crate) fn from_parts(fitted: Skeleton, points: PointData) -> Binding {
+        let (bones, _, tables) = prepare(&fitted);
+        Binding {
+            fit_grid_normals: tables.grid_normals(),
+            fitted,
+            bones,
+            points,
+        }
+    }
+
     /// Number of bound points.
     pub fn len(&self) -> usize {
         self.points.bone.len()
@@ -304,6 +256,74 @@ impl Binding {
     pub fn joint_points(&self) -> usize {
         self.points.partner.iter().filter(|&&p| p != NONE).count()
     }
+}
+
+/// The per-bone part of a binding (topology, joint sizes) with the fitted pose's prepared
+/// bones and baseline tables: a pure function of the fitted skeleton.
+fn prepare(fitted: &Skeleton) -> (Vec<BoneBind>, Vec<PreparedBone>, baseline::Tables) {
+    let t = &fitted.template;
+    let posed = fitted.pose();
+    let n = t.bones.len();
+    // Per-bone topology.
+    let successor = |k: usize| -> Option<usize> {
+        let (c, i) = t.bones[k].chain?;
+        t.chains[c]
+            .bones
+            .get(i + 1)
+            .copied()
+            .filter(|&s| t.bones[s].parent == Some(k))
+    };
+    let is_block = |k: usize| matches!(t.bones[k].kind, BoneKind::Block);
+    let mut bones: Vec<BoneBind> = (0..n)
+        .map(|k| {
+            let def = &t.bones[k];
+            let c1_partner = def.parent.filter(|&p| !(is_block(p) && is_block(k)));
+            let st = &fitted.bones[k];
+            BoneBind {
+                parent: def.parent,
+                c1_partner,
+                c2_partner: None,
+                parent_share: match c1_partner {
+                    Some(p) if successor(p) == Some(k) => 0.5,
+                    _ => 0.0,
+                },
+                shape: BoneShape::new(st.length, st.r1, st.r2),
+                frame: posed.frames[k],
+                c1: posed.bones[k].c1,
+                eps: 0.0,
+            }
+        })
+        .collect();
+    for k in 0..n {
+        let children: Vec<usize> = t.bones[k]
+            .children
+            .iter()
+            .copied()
+            .filter(|&c| bones[c].c1_partner == Some(k))
+            .collect();
+        bones[k].c2_partner =
+            successor(k)
+                .filter(|s| children.contains(s))
+                .or(if children.len() == 1 {
+                    Some(children[0])
+                } else {
+                    None
+                });
+        if let Some(p) = bones[k].c1_partner {
+            let rj = fitted.bones[p].r2;
+            let gap_p = fitted.bones[p].length - fitted.bones[p].r1 - rj;
+            let gap_k = fitted.bones[k].length - rj - fitted.bones[k].r2;
+            bones[k].eps = 0.2 * (0.25 * rj).max(rj.min(gap_p).min(gap_k));
+        }
+    }
+    let prepared: Vec<PreparedBone> = posed.bones.iter().map(Bone::prepare).collect();
+    // The fitted pose analysed against itself: the baseline curves at bind time come from
+    // the very code that evaluates them at deform time.
+    let mut frames: Vec<BoneFrame> = Vec::new();
+    frame::analyse(&bones, fitted, fitted, &posed, &mut frames);
+    let mut tables = baseline::Tables::default();
+    baseline::build_tables(&frames, &bones, None, &mut tables);
+    (bones, prepared, tables)
 }
 
 fn bind_point(

@@ -21,6 +21,7 @@
 //! | baseline skinning (ch. 4, Algorithm 3) — the default | [`baseline`] |
 //! | heightfield skinning with anisotropic bend + twist (ch. 3, Algorithm 2, eq. 3.1–3.3) | [`heightfield`] |
 //! | LBS and DQS with the weights of eq. 3.1, for comparison (fig. 3.5–3.8) | [`blend`] |
+//! | saving and loading a binding (kiosk cache) | [`store`] |
 //!
 //! ## Per frame
 //!
@@ -34,6 +35,7 @@ pub mod binding;
 pub mod blend;
 pub mod frame;
 pub mod heightfield;
+pub mod store;
 pub mod surface;
 
 pub use binding::Binding;
