@@ -14,6 +14,8 @@
 
 mod core;
 mod fakir;
+mod kiosk;
+mod restore;
 mod skin;
 
 use crate::error::Result;
@@ -48,6 +50,8 @@ pub fn entries() -> Vec<Entry> {
     let mut e = core::entries();
     e.extend(fakir::entries());
     e.extend(skin::entries());
+    e.extend(restore::entries());
+    e.extend(kiosk::entries());
     e
 }
 

@@ -2,7 +2,8 @@
 //!
 //! | command | what it does |
 //! |---|---|
-//! | `demo` (default) | loads the bundled demo statue, reports on it and fits the human anatomy |
+//! | `kiosk [--config FILE] [--screenshot OUT.png --frames N] [--pose NAME]` (default) | the museum kiosk in a window (see `src/cli/kiosk.rs`) |
+//! | `demo` | loads the bundled demo statue, reports on it and fits the human anatomy |
 //! | `info FILE` | points, bounding box, normals present, scale estimate |
 //! | `normals IN OUT [--k 16]` | (re-)estimates oriented normals, points kept in input order |
 //! | `synth OUT.ply [--template human] [--seed N] ...` | a synthetic statue with ground truth |
@@ -10,6 +11,7 @@
 //! | `repose IN.ply FIT.json POSE [--method baseline] [--proportions FILE] --out OUT.ply` | re-poses a registered statue by point-set skinning (see [`crate::anatomy::pose`], [`crate::skinning`]) |
 //! | `picture IN.ply --out OUT.png [--fit FIT.json] [--bones] [--pose POSE] [--method M\|all]` | a CPU-rendered picture; with a pose, one panel per method |
 //! | `film IN.ply FIT.json POSE --out DIR [--frames N] [--method M] [--orbit DEG]` | PNG frames of the statue moving into a pose |
+//! | `restore TARGET.ply --donor A.ply [--donor B.ply …] [--parts auto\|NAMES] [--pose donor\|keep] --out OUT.ply [--report R.json]` | virtual restoration by part combination |
 //! | `bench [--json] [--only PREFIX]` | the benchmarks (see [`crate::bench`]) |
 
 use crate::anatomy::Template;
@@ -19,9 +21,11 @@ use crate::error::{Error, Result};
 use crate::synth::{Cut, SynthOptions, generate};
 use clap::{Parser, Subcommand};
 
+mod kiosk;
 mod picture;
-mod register;
+pub(crate) mod register;
 mod repose;
+mod restore;
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -43,8 +47,23 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Loads the bundled demo statue, reports on it and fits the human anatomy (the default
-    /// command).
+    /// The museum kiosk in a window: the statues of the configuration, their anatomy fitted
+    /// live (cached in the configuration's cache folder), poses by touch (the default command).
+    Kiosk {
+        /// The kiosk configuration (a missing or wrong file falls back to the defaults).
+        #[arg(long, default_value = "config/kiosk.toml")]
+        config: PathBuf,
+        /// Capture the window into this PNG once the statue is drawn, then exit.
+        #[arg(long)]
+        screenshot: Option<PathBuf>,
+        /// Frames to run before the screenshot.
+        #[arg(long, default_value_t = 30)]
+        frames: u32,
+        /// Request this pose once the statue is ready.
+        #[arg(long)]
+        pose: Option<String>,
+    },
+    /// Loads the bundled demo statue, reports on it and fits the human anatomy.
     Demo,
     /// Points, bounding box, normals present, scale estimate of a PLY file.
     Info {
@@ -210,6 +229,37 @@ enum Command {
         #[arg(long, default_value_t = 720)]
         height: u32,
     },
+    /// Completes a broken statue with parts of donor statues (virtual restoration).
+    Restore {
+        target: PathBuf,
+        /// A donor statue (repeatable; the first that has a part gives it).
+        #[arg(long = "donor", required = true)]
+        donors: Vec<PathBuf>,
+        /// The target's fitted skeleton (otherwise fitted now).
+        #[arg(long)]
+        fit: Option<PathBuf>,
+        /// The donors' fitted skeletons, in the order of --donor (otherwise fitted now).
+        #[arg(long = "donor-fit")]
+        donor_fits: Vec<PathBuf>,
+        /// `auto` (the missing bones) or bone names separated by commas.
+        #[arg(long, default_value = "auto")]
+        parts: String,
+        /// Pose of the restored part: `donor` (its own pose) or `keep` (the target's guess).
+        #[arg(long, default_value = "donor")]
+        pose: String,
+        /// Template name or file.
+        #[arg(long, default_value = "human")]
+        template: String,
+        /// The statues' up axis, when known (x, y, z, -y, …).
+        #[arg(long)]
+        up: Option<String>,
+        /// The restored statue (PLY with a `provenance` property).
+        #[arg(long)]
+        out: PathBuf,
+        /// A JSON report of what replaced what.
+        #[arg(long)]
+        report: Option<PathBuf>,
+    },
     /// Runs the benchmarks.
     Bench {
         /// One JSON object per line.
@@ -242,7 +292,24 @@ where
             return Err(Error::input("invalid command line (see above)"));
         }
     };
-    match cli.command.unwrap_or(Command::Demo) {
+    let command = cli.command.unwrap_or_else(|| Command::Kiosk {
+        config: PathBuf::from("config/kiosk.toml"),
+        screenshot: None,
+        frames: 30,
+        pose: None,
+    });
+    match command {
+        Command::Kiosk {
+            config,
+            screenshot,
+            frames,
+            pose,
+        } => kiosk::run(&kiosk::KioskArgs {
+            config: &config,
+            screenshot: screenshot.as_deref(),
+            frames,
+            pose: pose.as_deref(),
+        }),
         Command::Demo => demo(),
         Command::Info {
             file,
@@ -367,6 +434,29 @@ where
             template: template.as_deref(),
             width,
             height,
+        }),
+        Command::Restore {
+            target,
+            donors,
+            fit,
+            donor_fits,
+            parts,
+            pose,
+            template,
+            up,
+            out,
+            report,
+        } => restore::run(&restore::Args {
+            target: &target,
+            donors: &donors,
+            fit: fit.as_deref(),
+            donor_fits: &donor_fits,
+            parts: &parts,
+            pose: &pose,
+            template: &template,
+            up: up.as_deref(),
+            out: &out,
+            report: report.as_deref(),
         }),
         Command::Bench { json, only, runs } => crate::bench::run_cli(json, only.as_deref(), runs),
     }

@@ -1,0 +1,78 @@
+//! Benchmark of the kiosk's per-frame CPU work while a statue animates: a headless app
+//! (`MinimalPlugins` + the kiosk's plugins without rendering) holds a 500k-point synthetic
+//! statue, ready (fitted and bound), and animates it to the `greeting` pose; each timed body is
+//! one `app.update()` — every kiosk system of the frame, skinning included (baseline).
+//! `extra.skin_ms` is the skinning system's share (last frame).
+
+use super::{BenchResult, Entry, time_it};
+use crate::error::Result;
+use crate::kiosk::animate::SkinWork;
+use crate::kiosk::config::KioskConfig;
+use crate::kiosk::{
+    ActiveStatue, CurrentPose, FittedSkeleton, KioskPlugin, PoseRequested, SkinnedPoints, Statue,
+    StatueBinding, StatueCloud, StatueState,
+};
+use crate::skinning::{Binding, Scratch};
+use bevy::prelude::*;
+use std::sync::Arc;
+
+pub(super) fn entries() -> Vec<Entry> {
+    vec![Entry {
+        name: "kiosk/animate_500k",
+        run: animate_500k,
+    }]
+}
+
+fn animate_500k(runs: usize) -> Result<BenchResult> {
+    let (cloud, skel) = super::skin::statue(500_000)?;
+    let binding = Arc::new(Binding::new(&cloud, &skel)?);
+    let mut config = KioskConfig::default();
+    // A long pose change, so every timed frame animates and re-skins.
+    config.skinning.pose_seconds = 1.0e6;
+    let mut app = App::new();
+    app.add_plugins((
+        MinimalPlugins,
+        bevy::input::InputPlugin,
+        KioskPlugin {
+            config,
+            headless: true,
+        },
+    ));
+    let cloud = Arc::new(cloud);
+    let e = app
+        .world_mut()
+        .spawn((
+            Statue {
+                index: 0,
+                title: "bench".into(),
+            },
+            StatueState::Ready,
+            StatueCloud(cloud.clone()),
+            FittedSkeleton(skel.clone()),
+            CurrentPose(skel.clone()),
+            StatueBinding(binding),
+            SkinnedPoints {
+                positions: cloud.positions.clone(),
+                normals: cloud.normals.clone().unwrap_or_default(),
+                colors: None,
+                version: 1,
+                scratch: Scratch::default(),
+            },
+            Transform::default(),
+            Visibility::default(),
+        ))
+        .id();
+    app.world_mut().resource_mut::<ActiveStatue>().entity = Some(e);
+    app.update();
+    app.world_mut()
+        .write_message(PoseRequested("greeting".into()));
+    app.update();
+    let mut r = time_it("kiosk/animate_500k", cloud.len() as u64, runs, || {
+        app.update();
+    });
+    r.extra.insert(
+        "skin_ms".into(),
+        app.world().resource::<SkinWork>().last_ms as f64,
+    );
+    Ok(r)
+}

@@ -1,0 +1,330 @@
+//! Loading statues: the file is read, checked, given normals and subsampled off the main
+//! thread; a cached fit and binding (keyed by the file's content and the template) make the
+//! next start immediate; the carousel and the reset switch statues.
+//!
+//! **Cache.** `cache_dir/<key>.fit.json` (the fitted skeleton) and `cache_dir/<key>.binding`
+//! ([`crate::skinning::Binding::save`]), where `key` is a 64-bit FNV-1a hash of the file's bytes,
+//! the template's name and source text, the point budget and [`CACHE_VERSION`]. A changed file,
+//! template or budget gives another key, so stale entries are never used; an unreadable or
+//! damaged entry is ignored (and the statue fitted again).
+
+use super::config::StatueEntry;
+use super::{
+    ActiveStatue, CurrentPose, FittedSkeleton, KioskSet, OrbitCamera, ResetRequested, Settings,
+    SkinnedPoints, Statue, StatueBinding, StatueCloud, StatueSelected, StatueState,
+};
+use crate::anatomy::{Skeleton, Template};
+use crate::cloud::PointCloud;
+use crate::cloud::normals::{NormalOptions, ensure_normals};
+use crate::cloud::ply::{ReadOptions, read_ply_with};
+use crate::error::{Error, Result};
+use crate::skinning::{Binding, Scratch};
+use bevy::prelude::*;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+/// Bump when the cached formats or the fitting change meaning.
+pub const CACHE_VERSION: u32 = 1;
+
+/// The result of a background job, polled each frame.
+#[derive(Component)]
+pub struct Pending<T: Send + 'static>(pub Arc<Mutex<Option<T>>>);
+
+impl<T: Send + 'static> Pending<T> {
+    /// Runs `job` on its own thread.
+    pub fn spawn(job: impl FnOnce() -> T + Send + 'static) -> Pending<T> {
+        let slot = Arc::new(Mutex::new(None));
+        let out = slot.clone();
+        std::thread::spawn(move || {
+            let r = job();
+            if let Ok(mut s) = out.lock() {
+                *s = Some(r);
+            }
+        });
+        Pending(slot)
+    }
+    /// The result, once there (taken).
+    pub fn take(&self) -> Option<T> {
+        self.0.lock().ok().and_then(|mut s| s.take())
+    }
+}
+
+/// What loading a statue gives.
+pub struct Loaded {
+    pub cloud: Arc<PointCloud>,
+    pub template: Arc<Template>,
+    pub up: Option<Vec3>,
+    pub cache_key: String,
+    /// A cached fit and binding, when valid.
+    pub cached: Option<(Skeleton, Binding)>,
+}
+
+/// 64-bit FNV-1a.
+pub fn fnv1a(chunks: &[&[u8]]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for c in chunks {
+        for &b in *c {
+            h ^= b as u64;
+            h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+    h
+}
+
+/// Keeps at most `budget` points: every `k`-th one, deterministic and spread over the file
+/// (scans are stored in scan order, so a stride samples every region).
+pub fn subsample(cloud: &mut PointCloud, budget: usize) {
+    let n = cloud.len();
+    if n <= budget || budget == 0 {
+        return;
+    }
+    let keep: Vec<usize> = (0..budget).map(|i| i * n / budget).collect();
+    *cloud = cloud.select(&keep);
+}
+
+/// Checks that `file` (under `root`) really lies inside `root` once links are resolved.
+pub fn resolve_inside(root: &Path, file: &Path) -> Result<PathBuf> {
+    let full = root.join(file);
+    let canon_root = root.canonicalize().map_err(|e| Error::Io {
+        path: root.to_path_buf(),
+        source: e,
+    })?;
+    let canon = full.canonicalize().map_err(|e| Error::Io {
+        path: full.clone(),
+        source: e,
+    })?;
+    if !canon.starts_with(&canon_root) {
+        return Err(Error::config(
+            &full,
+            format!("outside the assets root {}", root.display()),
+        ));
+    }
+    Ok(canon)
+}
+
+/// Loads one statue (runs off the main thread).
+pub fn load(
+    root: &Path,
+    cache_dir: &Path,
+    entry: &StatueEntry,
+    point_budget: usize,
+) -> Result<Loaded> {
+    let path = resolve_inside(root, &entry.file)?;
+    let bytes = std::fs::read(&path).map_err(|e| Error::Io {
+        path: path.clone(),
+        source: e,
+    })?;
+    let template = Arc::new(Template::resolve(&entry.template)?);
+    let up = entry
+        .up
+        .as_deref()
+        .map(crate::cli::register::parse_axis)
+        .transpose()
+        .map_err(|e| Error::config(&path, format!("up axis: {e}")))?;
+    let template_text = format!("{:?}", template);
+    let key = format!(
+        "{:016x}",
+        fnv1a(&[
+            &bytes,
+            template.name.as_bytes(),
+            template_text.as_bytes(),
+            &(point_budget as u64).to_le_bytes(),
+            &CACHE_VERSION.to_le_bytes(),
+            format!("{up:?}").as_bytes(),
+        ])
+    );
+    let mut cloud = read_ply_with(&path, &ReadOptions::default())?;
+    subsample(&mut cloud, point_budget);
+    ensure_normals(&mut cloud, &NormalOptions::default())
+        .map_err(|e| Error::input(format!("{}: {e}", path.display())))?;
+    let cached = read_cache(cache_dir, &key, &template, cloud.len());
+    Ok(Loaded {
+        cloud: Arc::new(cloud),
+        template,
+        up,
+        cache_key: key,
+        cached,
+    })
+}
+
+fn read_cache(
+    dir: &Path,
+    key: &str,
+    template: &Arc<Template>,
+    points: usize,
+) -> Option<(Skeleton, Binding)> {
+    let fit =
+        Skeleton::load_json(dir.join(format!("{key}.fit.json")), Some(template.clone())).ok()?;
+    let binding = Binding::load(dir.join(format!("{key}.binding")), template.clone()).ok()?;
+    (binding.len() == points).then_some((fit, binding))
+}
+
+/// Writes a fit and its binding to the cache (best effort: a failure is logged, not fatal).
+pub fn write_cache(dir: &Path, key: &str, fit: &Skeleton, binding: &Binding) {
+    let r = std::fs::create_dir_all(dir)
+        .map_err(|e| Error::Io {
+            path: dir.to_path_buf(),
+            source: e,
+        })
+        .and_then(|_| fit.save_json(dir.join(format!("{key}.fit.json"))))
+        .and_then(|_| binding.save(dir.join(format!("{key}.binding"))));
+    if let Err(e) = r {
+        warn!("could not cache the fit: {e}");
+    }
+}
+
+/// Loading, caching and switching statues.
+pub struct StatuePlugin;
+
+impl Plugin for StatuePlugin {
+    fn build(&self, app: &mut App) {
+        app.add_systems(
+            Update,
+            (switch_statue, spawn_active_statue, finish_loading)
+                .chain()
+                .in_set(KioskSet::Load),
+        );
+    }
+}
+
+/// The statue's cache key (for writing the fit when it is done).
+#[derive(Component, Clone, Debug)]
+pub struct CacheKey(pub String);
+
+/// The statue's template and up hint (for the registration).
+#[derive(Component, Clone, Debug)]
+pub struct StatueTemplate {
+    pub template: Arc<Template>,
+    pub up: Option<Vec3>,
+}
+
+fn switch_statue(
+    mut commands: Commands,
+    mut selected: MessageReader<StatueSelected>,
+    mut reset: MessageReader<ResetRequested>,
+    mut active: ResMut<ActiveStatue>,
+    settings: Res<Settings>,
+) {
+    let mut next = None;
+    for s in selected.read() {
+        next = Some(s.0);
+    }
+    if reset.read().count() > 0 {
+        next = Some(0);
+    }
+    let Some(i) = next else { return };
+    let n = settings.0.statues.len();
+    if n == 0 {
+        return;
+    }
+    let i = i.min(n - 1);
+    if i == active.index && active.entity.is_some() && next.is_some() {
+        // Same statue: a reset keeps it loaded (the animation system brings its pose home).
+        return;
+    }
+    if let Some(e) = active.entity.take() {
+        commands.entity(e).despawn();
+    }
+    active.index = i;
+}
+
+fn spawn_active_statue(
+    mut commands: Commands,
+    mut active: ResMut<ActiveStatue>,
+    settings: Res<Settings>,
+) {
+    if active.entity.is_some() {
+        return;
+    }
+    let cfg = &settings.0;
+    let Some(entry) = cfg.statues.get(active.index).cloned() else {
+        return;
+    };
+    let root = cfg.assets_root.clone();
+    let cache = cfg.cache_dir.clone();
+    let budget = cfg.budget.point_budget;
+    let job = {
+        let entry = entry.clone();
+        move || load(&root, &cache, &entry, budget)
+    };
+    let e = commands
+        .spawn((
+            Statue {
+                index: active.index,
+                title: entry.title.clone(),
+            },
+            StatueState::Loading,
+            Pending::spawn(job),
+            Transform::default(),
+            Visibility::default(),
+        ))
+        .id();
+    active.entity = Some(e);
+}
+
+#[allow(clippy::type_complexity)]
+fn finish_loading(
+    mut commands: Commands,
+    mut q: Query<(Entity, &mut StatueState, &Pending<Result<Loaded>>)>,
+    mut camera: ResMut<OrbitCamera>,
+) {
+    for (e, mut state, pending) in &mut q {
+        let Some(r) = pending.take() else { continue };
+        let mut ec = commands.entity(e);
+        ec.remove::<Pending<Result<Loaded>>>();
+        match r {
+            Err(err) => {
+                warn!("statue failed to load: {err}");
+                *state = StatueState::Failed {
+                    message: err.to_string(),
+                };
+            }
+            Ok(loaded) => {
+                frame_camera(&mut camera, &loaded.cloud);
+                let cloud = loaded.cloud.clone();
+                ec.insert((
+                    StatueCloud(cloud.clone()),
+                    SkinnedPoints {
+                        positions: cloud.positions.clone(),
+                        normals: cloud
+                            .normals
+                            .clone()
+                            .unwrap_or_else(|| vec![Vec3::Y; cloud.len()]),
+                        colors: cloud.colors.clone(),
+                        version: 1,
+                        scratch: Scratch::default(),
+                    },
+                    CacheKey(loaded.cache_key.clone()),
+                    StatueTemplate {
+                        template: loaded.template.clone(),
+                        up: loaded.up,
+                    },
+                ));
+                match loaded.cached {
+                    Some((fit, binding)) => {
+                        info!("statue ready from the cache");
+                        ec.insert((
+                            CurrentPose(fit.clone()),
+                            FittedSkeleton(fit),
+                            StatueBinding(Arc::new(binding)),
+                        ));
+                        *state = StatueState::Ready;
+                    }
+                    None => {
+                        *state = StatueState::Fitting { units: 0 };
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Frames the orbit camera on a cloud (home view: from the front, a little above).
+pub fn frame_camera(camera: &mut OrbitCamera, cloud: &PointCloud) {
+    if let Some(b) = cloud.bounding_box() {
+        let size = b.size().max_element().max(1e-6);
+        camera.target = b.center();
+        camera.home = (0.0, 0.1, 1.9 * size);
+        camera.reset();
+    }
+}

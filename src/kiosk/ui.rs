@@ -1,0 +1,774 @@
+//! The visitor interface (bevy_ui): large touch targets, no text entry.
+//!
+//! ```text
+//! ┌────────────────────────────────────────────────────────────────────┐
+//! │ Pygmalion          [<]  Dancing Girl  [>]                  [Reset] │
+//! │                         credit line                                │
+//! │                     status (loading / fitting · n)                 │
+//! │                      ┌ error card (failed) ┐      ┌ operator ┐     │
+//! │                      └─────────────────────┘      │ panel    │     │
+//! │                                                   └──────────┘     │
+//! │                 hint: touch the statue to turn it…                 │
+//! │ [Original] [Greeting] [Arms raised] [Contrapposto] [Walking] …      │
+//! └────────────────────────────────────────────────────────────────────┘
+//!            "still there?" overlay with the countdown (over everything)
+//! ```
+//!
+//! **Logic and drawing are separate.** Whatever the `headless` flag, the plugin runs the
+//! systems that turn presses into messages (so tests drive them without a window): a pressed
+//! bevy_ui [`UiInteraction`] on an entity carrying a [`UiAction`] writes
+//! [`PoseRequested`] / [`StatueSelected`] / [`ResetRequested`], sets [`SkinMethod`] or
+//! [`ShowBones`], or toggles the [`OperatorPanel`], and always writes an [`Interaction`]. The
+//! operator panel also toggles on F2 and on a three-finger tap ([`ThreeFingerTap`]). With
+//! `headless: false` the plugin also spawns the nodes ([`UiPart`] marks the ones it updates)
+//! and keeps their texts and visibility up to date: title and credit of the active statue,
+//! the status line (`texts.loading`, `texts.fitting` with the registration's work-unit count
+//! as a progress figure), the error card (`texts.load_failed`; the carousel still works), the
+//! "still there?" overlay with its countdown, the hint, and the operator panel (skinning
+//! method, bones on/off, fps, last registration and skinning milliseconds, configuration
+//! problems and the statue's failure message).
+//!
+//! **Font.** Bevy's built-in font covers ASCII only (no "…", "·", "–", accents), so at
+//! start the plugin loads the first readable font of [`font_candidates`]
+//! (`<assets_root>/fonts/ui.ttf`, then common system sans fonts such as DejaVu Sans) into the
+//! font assets ([`UiFont`]); without one it keeps the built-in font and shows texts through
+//! [`ascii_fallback`] (dashes, dots, ellipses and quotes become ASCII look-alikes).
+//!
+//! Pose names are shown in a friendly form ([`friendly_pose_name`]: `arms_raised` →
+//! "Arms raised", `identity` → "Original", a file path → its stem).
+
+use super::animate::{SkinMethod, SkinWork};
+use super::attract::IdleState;
+use super::config::Texts;
+use super::fitting::FitWork;
+use super::gestures::ThreeFingerTap;
+use super::{
+    ActiveStatue, Interaction, KioskSet, PoseRequested, ResetRequested, Settings, ShowBones,
+    Statue, StatueSelected, StatueState,
+};
+use crate::skinning::Method;
+use bevy::prelude::*;
+use bevy::ui::Interaction as UiInteraction;
+use std::path::{Path, PathBuf};
+
+/// The visitor interface.
+pub struct UiPlugin {
+    pub headless: bool,
+}
+
+/// What pressing a button does.
+#[derive(Component, Clone, Debug, PartialEq)]
+pub enum UiAction {
+    /// Animate to the named pose.
+    Pose(String),
+    /// Carousel: the previous statue.
+    PreviousStatue,
+    /// Carousel: the next statue.
+    NextStatue,
+    /// Back to the home state.
+    Reset,
+    /// Operator: the skinning method.
+    Method(Method),
+    /// Operator: bones on/off.
+    ToggleBones,
+    /// Operator panel open/closed.
+    ToggleOperatorPanel,
+}
+
+/// Whether the operator panel is open.
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq)]
+pub struct OperatorPanel {
+    pub open: bool,
+}
+
+/// Frames per second, smoothed (operator panel).
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameRate {
+    pub fps: f32,
+}
+
+/// The font of the interface, when one was found (see [`font_candidates`]); without one,
+/// Bevy's built-in font (ASCII only) is used and texts go through [`ascii_fallback`].
+#[derive(Resource, Clone, Debug, Default)]
+pub struct UiFont {
+    pub handle: Option<Handle<Font>>,
+    pub path: Option<PathBuf>,
+}
+
+/// The nodes the UI updates.
+#[derive(Component, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum UiPart {
+    Title,
+    StatueTitle,
+    Credit,
+    Status,
+    Hint,
+    PoseStrip,
+    ErrorCard,
+    ErrorText,
+    StillThere,
+    StillThereText,
+    Countdown,
+    ContinueText,
+    OperatorPanel,
+    BonesLabel,
+    Fps,
+    Work,
+    Problems,
+}
+
+impl Plugin for UiPlugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<OperatorPanel>()
+            .init_resource::<UiFont>()
+            .init_resource::<FrameRate>()
+            .init_resource::<ShowBones>()
+            .add_message::<PoseRequested>()
+            .add_message::<StatueSelected>()
+            .add_message::<ResetRequested>()
+            .add_message::<Interaction>()
+            .add_message::<ThreeFingerTap>()
+            .add_systems(
+                Update,
+                (press_buttons, toggle_operator_panel, measure_fps)
+                    .chain()
+                    .in_set(KioskSet::Ui),
+            );
+        if !self.headless {
+            app.add_systems(Startup, (load_font, spawn_ui).chain())
+                .add_systems(
+                    Update,
+                    (update_texts, update_buttons)
+                        .after(measure_fps)
+                        .in_set(KioskSet::Ui),
+                );
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Pure helpers.
+
+/// A pose name as visitors read it: `arms_raised` → "Arms raised", `identity` → "Original",
+/// a file path → its stem, made friendly the same way.
+pub fn friendly_pose_name(name: &str) -> String {
+    let stem = std::path::Path::new(name)
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| name.to_string());
+    if stem == "identity" {
+        return "Original".into();
+    }
+    let words = stem.replace(['_', '-'], " ");
+    let words = words.split_whitespace().collect::<Vec<_>>().join(" ");
+    let mut c = words.chars();
+    match c.next() {
+        Some(first) => first.to_uppercase().chain(c).collect(),
+        None => name.to_string(),
+    }
+}
+
+/// The statue index `step` places from `current` on a carousel of `count` statues (wrapping).
+pub fn carousel_step(current: usize, count: usize, step: isize) -> usize {
+    if count == 0 {
+        return 0;
+    }
+    (current as isize + step).rem_euclid(count as isize) as usize
+}
+
+/// The status line for a statue state (empty when there is nothing to say).
+pub fn status_text(state: &StatueState, texts: &Texts) -> String {
+    match state {
+        StatueState::Loading => texts.loading.clone(),
+        StatueState::Fitting { units } => format!("{} · {units}", texts.fitting),
+        StatueState::Binding => texts.fitting.clone(),
+        StatueState::Ready | StatueState::Failed { .. } => String::new(),
+    }
+}
+
+/// Where the interface looks for its font, in order: `<assets_root>/fonts/ui.ttf` (or
+/// `.otf`; a museum can ship a font covering its language there), then common system sans
+/// fonts (DejaVu Sans, Noto Sans, Liberation Sans).
+pub fn font_candidates(assets_root: &Path) -> Vec<PathBuf> {
+    let mut v = vec![
+        assets_root.join("fonts/ui.ttf"),
+        assets_root.join("fonts/ui.otf"),
+    ];
+    v.extend(
+        [
+            "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+            "/usr/share/fonts/TTF/DejaVuSans.ttf",
+            "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+            "/usr/share/fonts/truetype/noto/NotoSans-Regular.ttf",
+            "/usr/share/fonts/noto/NotoSans-Regular.ttf",
+            "/usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf",
+            "C:/Windows/Fonts/segoeui.ttf",
+            "C:/Windows/Fonts/arial.ttf",
+        ]
+        .map(PathBuf::from),
+    );
+    v
+}
+
+/// Typographic characters Bevy's built-in font lacks, replaced by ASCII look-alikes (dashes,
+/// middle dots, ellipses, curly quotes, non-breaking spaces).
+pub fn ascii_fallback(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '\u{2010}'..='\u{2015}' | '\u{2212}' => out.push('-'),
+            '\u{00b7}' | '\u{2022}' | '\u{2027}' => out.push('|'),
+            '\u{2026}' => out.push_str("..."),
+            '\u{2018}' | '\u{2019}' | '\u{201a}' | '\u{2032}' => out.push('\''),
+            '\u{201c}' | '\u{201d}' | '\u{201e}' | '\u{00ab}' | '\u{00bb}' => out.push('"'),
+            '\u{00a0}' | '\u{202f}' | '\u{2009}' => out.push(' '),
+            '\u{00d7}' => out.push('x'),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+/// The countdown as shown (whole seconds, rounded up).
+pub fn countdown_text(remaining_s: f32) -> String {
+    format!("{}", remaining_s.max(0.0).ceil() as u32)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Logic (runs headless too).
+
+#[allow(clippy::too_many_arguments)]
+fn press_buttons(
+    buttons: Query<(&UiInteraction, &UiAction), Changed<UiInteraction>>,
+    settings: Option<Res<Settings>>,
+    active: Option<Res<ActiveStatue>>,
+    mut panel: ResMut<OperatorPanel>,
+    mut show_bones: ResMut<ShowBones>,
+    mut commands: Commands,
+    mut poses: MessageWriter<PoseRequested>,
+    mut statues: MessageWriter<StatueSelected>,
+    mut reset: MessageWriter<ResetRequested>,
+    mut interactions: MessageWriter<Interaction>,
+) {
+    let count = settings.as_ref().map_or(0, |s| s.0.statues.len());
+    let current = active.as_ref().map_or(0, |a| a.index);
+    for (state, action) in &buttons {
+        if *state != UiInteraction::Pressed {
+            continue;
+        }
+        interactions.write(Interaction);
+        match action {
+            UiAction::Pose(name) => {
+                poses.write(PoseRequested(name.clone()));
+            }
+            UiAction::PreviousStatue | UiAction::NextStatue if count > 0 => {
+                let step = if *action == UiAction::NextStatue {
+                    1
+                } else {
+                    -1
+                };
+                statues.write(StatueSelected(carousel_step(current, count, step)));
+            }
+            UiAction::PreviousStatue | UiAction::NextStatue => {}
+            UiAction::Reset => {
+                reset.write(ResetRequested);
+            }
+            UiAction::Method(m) => commands.insert_resource(SkinMethod(*m)),
+            UiAction::ToggleBones => show_bones.0 = !show_bones.0,
+            UiAction::ToggleOperatorPanel => panel.open = !panel.open,
+        }
+    }
+}
+
+fn toggle_operator_panel(
+    keys: Option<Res<ButtonInput<KeyCode>>>,
+    mut taps: MessageReader<ThreeFingerTap>,
+    mut panel: ResMut<OperatorPanel>,
+) {
+    let mut toggles = taps.read().count();
+    if keys.is_some_and(|k| k.just_pressed(KeyCode::F2)) {
+        toggles += 1;
+    }
+    if toggles % 2 == 1 {
+        panel.open = !panel.open;
+    }
+}
+
+fn measure_fps(time: Res<Time<Real>>, mut rate: ResMut<FrameRate>) {
+    let dt = time.delta_secs();
+    if dt > 0.0 {
+        let now = 1.0 / dt;
+        rate.fps = if rate.fps > 0.0 {
+            rate.fps * 0.9 + now * 0.1
+        } else {
+            now
+        };
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Drawing.
+
+const FG: Color = Color::srgb(0.95, 0.94, 0.90);
+const FG_DIM: Color = Color::srgb(0.74, 0.73, 0.69);
+const CARD: Color = Color::srgba(0.07, 0.08, 0.11, 0.72);
+const BUTTON: Color = Color::srgba(0.20, 0.22, 0.28, 0.92);
+const BUTTON_HOVER: Color = Color::srgba(0.28, 0.31, 0.38, 0.95);
+const BUTTON_PRESSED: Color = Color::srgba(0.42, 0.47, 0.56, 1.0);
+const BUTTON_ON: Color = Color::srgba(0.18, 0.44, 0.52, 0.95);
+const ERROR_CARD: Color = Color::srgba(0.30, 0.14, 0.12, 0.88);
+const OVERLAY: Color = Color::srgba(0.0, 0.0, 0.0, 0.62);
+
+fn button_node(min_width: f32, min_height: f32) -> Node {
+    Node {
+        min_width: Val::Px(min_width),
+        min_height: Val::Px(min_height),
+        padding: UiRect::axes(Val::Px(22.0), Val::Px(12.0)),
+        justify_content: JustifyContent::Center,
+        align_items: AlignItems::Center,
+        border_radius: BorderRadius::all(Val::Px(14.0)),
+        ..default()
+    }
+}
+
+/// How texts are drawn: the UI font, and whether it is Bevy's built-in ASCII-only font
+/// (then texts go through [`ascii_fallback`]).
+struct Look {
+    font: FontSource,
+    ascii: bool,
+}
+
+impl Look {
+    fn text(&self, s: impl Into<String>, size: f32, color: Color) -> (Text, TextFont, TextColor) {
+        let s: String = s.into();
+        (
+            Text::new(if self.ascii { ascii_fallback(&s) } else { s }),
+            TextFont {
+                font: self.font.clone(),
+                font_size: FontSize::Px(size),
+                ..default()
+            },
+            TextColor(color),
+        )
+    }
+
+    fn button(
+        &self,
+        action: UiAction,
+        label: String,
+        size: f32,
+        min_w: f32,
+        min_h: f32,
+    ) -> impl Bundle {
+        (
+            Button,
+            action,
+            button_node(min_w, min_h),
+            BackgroundColor(BUTTON),
+            children![self.text(label, size, FG)],
+        )
+    }
+}
+
+fn card(node: Node) -> (Node, BackgroundColor) {
+    (
+        Node {
+            border_radius: BorderRadius::all(Val::Px(18.0)),
+            padding: UiRect::all(Val::Px(12.0)),
+            ..node
+        },
+        BackgroundColor(CARD),
+    )
+}
+
+fn spawn_ui(mut commands: Commands, settings: Res<Settings>, font: Res<UiFont>) {
+    let look = Look {
+        font: font
+            .handle
+            .clone()
+            .map_or_else(FontSource::default, FontSource::Handle),
+        ascii: font.handle.is_none(),
+    };
+    let cfg = &settings.0;
+    let t = &cfg.texts;
+    let first = cfg.statues.first();
+    // The whole screen: top bar, middle, bottom strip.
+    commands
+        .spawn(Node {
+            width: Val::Percent(100.0),
+            height: Val::Percent(100.0),
+            position_type: PositionType::Absolute,
+            flex_direction: FlexDirection::Column,
+            justify_content: JustifyContent::SpaceBetween,
+            padding: UiRect::all(Val::Px(16.0)),
+            ..default()
+        })
+        .with_children(|root| {
+            // Top bar: title, carousel, reset.
+            root.spawn(Node {
+                flex_direction: FlexDirection::Row,
+                justify_content: JustifyContent::SpaceBetween,
+                align_items: AlignItems::FlexStart,
+                ..default()
+            })
+            .with_children(|top| {
+                top.spawn((look.text(t.title.clone(), 30.0, FG_DIM), UiPart::Title));
+                top.spawn((
+                    card(Node {
+                        flex_direction: FlexDirection::Row,
+                        align_items: AlignItems::Center,
+                        column_gap: Val::Px(16.0),
+                        ..default()
+                    }),
+                    // Presses on the card do not turn the statue.
+                    UiInteraction::default(),
+                ))
+                .with_children(|c| {
+                    c.spawn(look.button(UiAction::PreviousStatue, "<".into(), 40.0, 88.0, 88.0));
+                    c.spawn(Node {
+                        flex_direction: FlexDirection::Column,
+                        align_items: AlignItems::Center,
+                        min_width: Val::Px(320.0),
+                        ..default()
+                    })
+                    .with_children(|col| {
+                        col.spawn((
+                            look.text(first.map_or("", |s| s.title.as_str()), 34.0, FG),
+                            UiPart::StatueTitle,
+                        ));
+                        col.spawn((
+                            look.text(first.map_or("", |s| s.credit.as_str()), 18.0, FG_DIM),
+                            UiPart::Credit,
+                        ));
+                    });
+                    c.spawn(look.button(UiAction::NextStatue, ">".into(), 40.0, 88.0, 88.0));
+                });
+                top.spawn(look.button(UiAction::Reset, t.reset.clone(), 28.0, 140.0, 88.0));
+            });
+            // Middle: status line and the error card.
+            root.spawn(Node {
+                flex_grow: 1.0,
+                flex_direction: FlexDirection::Column,
+                align_items: AlignItems::Center,
+                row_gap: Val::Px(24.0),
+                padding: UiRect::top(Val::Px(16.0)),
+                ..default()
+            })
+            .with_children(|mid| {
+                mid.spawn((
+                    look.text(t.loading.clone(), 26.0, FG),
+                    Node {
+                        padding: UiRect::axes(Val::Px(18.0), Val::Px(8.0)),
+                        border_radius: BorderRadius::all(Val::Px(16.0)),
+                        ..default()
+                    },
+                    BackgroundColor(CARD),
+                    UiPart::Status,
+                ));
+                mid.spawn((
+                    Node {
+                        max_width: Val::Px(640.0),
+                        padding: UiRect::all(Val::Px(28.0)),
+                        border_radius: BorderRadius::all(Val::Px(22.0)),
+                        justify_content: JustifyContent::Center,
+                        ..default()
+                    },
+                    BackgroundColor(ERROR_CARD),
+                    Visibility::Hidden,
+                    UiPart::ErrorCard,
+                ))
+                .with_children(|e| {
+                    e.spawn((
+                        look.text(t.load_failed.clone(), 30.0, FG),
+                        UiPart::ErrorText,
+                    ));
+                });
+            });
+            // Bottom: hint and pose strip.
+            root.spawn(Node {
+                flex_direction: FlexDirection::Column,
+                align_items: AlignItems::Center,
+                row_gap: Val::Px(12.0),
+                ..default()
+            })
+            .with_children(|bottom| {
+                bottom.spawn((look.text(t.hint.clone(), 22.0, FG_DIM), UiPart::Hint));
+                bottom
+                    .spawn((
+                        card(Node {
+                            flex_direction: FlexDirection::Row,
+                            flex_wrap: FlexWrap::Wrap,
+                            justify_content: JustifyContent::Center,
+                            column_gap: Val::Px(12.0),
+                            row_gap: Val::Px(12.0),
+                            ..default()
+                        }),
+                        UiInteraction::default(),
+                        UiPart::PoseStrip,
+                    ))
+                    .with_children(|strip| {
+                        for pose in &cfg.skinning.poses {
+                            strip.spawn(look.button(
+                                UiAction::Pose(pose.clone()),
+                                friendly_pose_name(pose),
+                                26.0,
+                                150.0,
+                                84.0,
+                            ));
+                        }
+                    });
+            });
+        });
+
+    // "Still there?" overlay: lets touches through (the gestures' Interaction wakes the
+    // kiosk up).
+    commands
+        .spawn((
+            Node {
+                width: Val::Percent(100.0),
+                height: Val::Percent(100.0),
+                position_type: PositionType::Absolute,
+                flex_direction: FlexDirection::Column,
+                justify_content: JustifyContent::Center,
+                align_items: AlignItems::Center,
+                row_gap: Val::Px(24.0),
+                ..default()
+            },
+            BackgroundColor(OVERLAY),
+            GlobalZIndex(10),
+            Visibility::Hidden,
+            UiPart::StillThere,
+        ))
+        .with_children(|o| {
+            o.spawn((
+                look.text(t.still_there.clone(), 64.0, FG),
+                UiPart::StillThereText,
+            ));
+            o.spawn((look.text("", 120.0, FG), UiPart::Countdown));
+            o.spawn((
+                look.text(t.touch_to_continue.clone(), 32.0, FG_DIM),
+                UiPart::ContinueText,
+            ));
+        });
+
+    // Operator panel.
+    commands
+        .spawn((
+            Node {
+                position_type: PositionType::Absolute,
+                right: Val::Px(16.0),
+                top: Val::Px(130.0),
+                width: Val::Px(480.0),
+                flex_direction: FlexDirection::Column,
+                row_gap: Val::Px(12.0),
+                padding: UiRect::all(Val::Px(18.0)),
+                border_radius: BorderRadius::all(Val::Px(18.0)),
+                ..default()
+            },
+            BackgroundColor(Color::srgba(0.05, 0.05, 0.07, 0.92)),
+            UiInteraction::default(),
+            GlobalZIndex(20),
+            Visibility::Hidden,
+            UiPart::OperatorPanel,
+        ))
+        .with_children(|p| {
+            p.spawn(Node {
+                flex_direction: FlexDirection::Row,
+                justify_content: JustifyContent::SpaceBetween,
+                align_items: AlignItems::Center,
+                ..default()
+            })
+            .with_children(|h| {
+                h.spawn(look.text("Operator", 26.0, FG));
+                h.spawn(look.button(
+                    UiAction::ToggleOperatorPanel,
+                    "Close".into(),
+                    20.0,
+                    96.0,
+                    56.0,
+                ));
+            });
+            p.spawn(look.text("Skinning", 18.0, FG_DIM));
+            p.spawn(Node {
+                flex_direction: FlexDirection::Row,
+                flex_wrap: FlexWrap::Wrap,
+                column_gap: Val::Px(8.0),
+                row_gap: Val::Px(8.0),
+                ..default()
+            })
+            .with_children(|row| {
+                for m in Method::ALL {
+                    row.spawn(look.button(UiAction::Method(m), m.name().into(), 20.0, 90.0, 56.0));
+                }
+            });
+            p.spawn((
+                Button,
+                UiAction::ToggleBones,
+                button_node(160.0, 56.0),
+                BackgroundColor(BUTTON),
+            ))
+            .with_children(|b| {
+                b.spawn((look.text("Bones: off", 20.0, FG), UiPart::BonesLabel));
+            });
+            p.spawn((look.text("", 18.0, FG), UiPart::Fps));
+            p.spawn((look.text("", 18.0, FG), UiPart::Work));
+            p.spawn((look.text("", 16.0, FG_DIM), UiPart::Problems));
+        });
+}
+
+/// Loads the first font of [`font_candidates`] that reads and parses into the font assets.
+fn load_font(
+    settings: Res<Settings>,
+    fonts: Option<ResMut<Assets<Font>>>,
+    mut ui_font: ResMut<UiFont>,
+) {
+    let Some(mut fonts) = fonts else { return };
+    for path in font_candidates(&settings.0.assets_root) {
+        let Ok(bytes) = std::fs::read(&path) else {
+            continue;
+        };
+        if bytes.len() < 12 {
+            continue;
+        }
+        info!("interface font: {}", path.display());
+        ui_font.handle = Some(fonts.add(Font::from_bytes(bytes)));
+        ui_font.path = Some(path);
+        return;
+    }
+    warn!(
+        "no interface font found (put one at {}); using Bevy's built-in font, ASCII only",
+        settings.0.assets_root.join("fonts/ui.ttf").display()
+    );
+}
+
+fn set_text(ascii: bool, text: &mut Mut<Text>, s: &str) {
+    let s = if ascii {
+        ascii_fallback(s)
+    } else {
+        s.to_string()
+    };
+    if text.0 != s {
+        text.0 = s;
+    }
+}
+
+fn set_visible(v: &mut Mut<Visibility>, visible: bool) {
+    let want = if visible {
+        Visibility::Inherited
+    } else {
+        Visibility::Hidden
+    };
+    if **v != want {
+        **v = want;
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn update_texts(
+    settings: Res<Settings>,
+    active: Option<Res<ActiveStatue>>,
+    statues: Query<(Entity, &Statue, &StatueState)>,
+    idle: Option<Res<IdleState>>,
+    panel: Res<OperatorPanel>,
+    rate: Res<FrameRate>,
+    fit: Option<Res<FitWork>>,
+    skin: Option<Res<SkinWork>>,
+    show_bones: Res<ShowBones>,
+    font: Res<UiFont>,
+    mut texts: Query<(&UiPart, &mut Text)>,
+    mut visibility: Query<(&UiPart, &mut Visibility)>,
+) {
+    let cfg = &settings.0;
+    let ascii = font.handle.is_none();
+    let index = active.as_ref().map_or(0, |a| a.index);
+    let entry = cfg.statues.get(index);
+    let state = statues
+        .iter()
+        .find(|(e, _, _)| active.as_ref().and_then(|a| a.entity) == Some(*e))
+        .or_else(|| statues.iter().next())
+        .map(|(_, _, s)| s);
+    let status = state.map_or_else(|| cfg.texts.loading.clone(), |s| status_text(s, &cfg.texts));
+    let failed = match state {
+        Some(StatueState::Failed { message }) => Some(message.as_str()),
+        _ => None,
+    };
+    let ready = matches!(state, Some(StatueState::Ready));
+    let still = match idle.as_deref() {
+        Some(IdleState::StillThere { remaining_s }) => Some(*remaining_s),
+        _ => None,
+    };
+    let work = format!(
+        "registration {:.1} ms (max {:.1}, budget {:.1})\nskinning {:.1} ms (max {:.1}, {} deforms)",
+        fit.as_ref().map_or(0.0, |f| f.last_ms),
+        fit.as_ref().map_or(0.0, |f| f.max_ms),
+        fit.as_ref().map_or(0.0, |f| f.budget_ms),
+        skin.as_ref().map_or(0.0, |s| s.last_ms),
+        skin.as_ref().map_or(0.0, |s| s.max_ms),
+        skin.as_ref().map_or(0, |s| s.count),
+    );
+    let mut problems: Vec<String> = cfg.problems.clone();
+    if let Some(m) = failed {
+        problems.push(format!("statue: {m}"));
+    }
+    let problems = if problems.is_empty() {
+        "No configuration problems.".to_string()
+    } else {
+        format!("Problems:\n{}", problems.join("\n"))
+    };
+    for (part, mut text) in &mut texts {
+        match part {
+            UiPart::StatueTitle => {
+                set_text(ascii, &mut text, entry.map_or("", |e| e.title.as_str()))
+            }
+            UiPart::Credit => set_text(ascii, &mut text, entry.map_or("", |e| e.credit.as_str())),
+            UiPart::Status => set_text(ascii, &mut text, &status),
+            UiPart::Countdown => set_text(ascii, &mut text, &countdown_text(still.unwrap_or(0.0))),
+            UiPart::BonesLabel => set_text(
+                ascii,
+                &mut text,
+                if show_bones.0 {
+                    "Bones: on"
+                } else {
+                    "Bones: off"
+                },
+            ),
+            UiPart::Fps => set_text(ascii, &mut text, &format!("{:.0} fps", rate.fps)),
+            UiPart::Work => set_text(ascii, &mut text, &work),
+            UiPart::Problems => set_text(ascii, &mut text, &problems),
+            _ => {}
+        }
+    }
+    for (part, mut v) in &mut visibility {
+        match part {
+            UiPart::Status => set_visible(&mut v, !status.is_empty()),
+            UiPart::ErrorCard => set_visible(&mut v, failed.is_some()),
+            UiPart::Hint => set_visible(&mut v, ready),
+            UiPart::StillThere => set_visible(&mut v, still.is_some()),
+            UiPart::OperatorPanel => set_visible(&mut v, panel.open),
+            _ => {}
+        }
+    }
+}
+
+fn update_buttons(
+    method: Option<Res<SkinMethod>>,
+    show_bones: Res<ShowBones>,
+    mut buttons: Query<(&UiInteraction, &UiAction, &mut BackgroundColor), With<Button>>,
+) {
+    for (state, action, mut bg) in &mut buttons {
+        let on = match action {
+            UiAction::Method(m) => method.as_ref().is_some_and(|s| s.0 == *m),
+            UiAction::ToggleBones => show_bones.0,
+            _ => false,
+        };
+        let color = match state {
+            UiInteraction::Pressed => BUTTON_PRESSED,
+            UiInteraction::Hovered => BUTTON_HOVER,
+            UiInteraction::None if on => BUTTON_ON,
+            UiInteraction::None => BUTTON,
+        };
+        if bg.0 != color {
+            bg.0 = color;
+        }
+    }
+}

@@ -1,0 +1,279 @@
+//! Virtual restoration by part combination (thesis ch. 5, paper 001 §5): a broken statue
+//! (the *target*) is completed with parts of other statues (*donors*), each brought first to
+//! the target's proportions and pose, then merged without a seam.
+//!
+//! ```text
+//! target cloud + fit ─► support (which bones are missing) ─► completed skeleton
+//! donor cloud + fit ─► transfer (scale + skin the donor's part onto the completed skeleton)
+//!                   ─► merge (eq. 5.1 in the overlap) ─► restored cloud + provenance
+//! ```
+//!
+//! | stage | module |
+//! |---|---|
+//! | which bones are there: support, missing and partial bones, completion | [`support`] |
+//! | a donor's part re-proportioned and re-posed onto the target | [`transfer`] |
+//! | the overlap merged to a single layer (eq. 5.1) | [`merge`] |
+//! | the whole restoration, with provenance | [`restore`] (this module) |
+
+pub mod merge;
+pub mod support;
+pub mod transfer;
+
+use crate::anatomy::Skeleton;
+use crate::cloud::PointCloud;
+use crate::error::{Error, Result};
+use crate::math::Vec3;
+use merge::{MergeOptions, MergeStats, merge};
+use serde::Serialize;
+use support::{BoneSupport, complete, support};
+use transfer::{Part, PoseSource, TransferOptions, parts_from_support, transfer};
+
+/// Where a restored point comes from.
+pub const FROM_TARGET: u32 = 0;
+
+/// One donor statue.
+pub struct Donor<'a> {
+    pub name: String,
+    pub cloud: &'a PointCloud,
+    pub fit: &'a Skeleton,
+}
+
+/// Options of a restoration.
+#[derive(Clone, Debug)]
+pub struct RestoreOptions {
+    /// Bones to restore (names); empty: every missing bone.
+    pub parts: Vec<String>,
+    pub pose: PoseSource,
+    pub transfer: TransferOptions,
+    pub merge: MergeOptions,
+}
+
+impl Default for RestoreOptions {
+    fn default() -> Self {
+        RestoreOptions {
+            parts: Vec::new(),
+            pose: PoseSource::Donor,
+            transfer: TransferOptions::default(),
+            merge: MergeOptions::default(),
+        }
+    }
+}
+
+/// What replaced what (the JSON report).
+#[derive(Clone, Debug, Serialize)]
+pub struct PartReport {
+    pub bones: Vec<String>,
+    pub attach: Option<String>,
+    pub donor: String,
+    /// Source index in [`Restored::source`] (donor `i` is `i + 1`).
+    pub source: u32,
+    pub points: usize,
+    pub merge: MergeStats,
+}
+
+/// The restoration's report.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    pub support: Vec<BoneSupport>,
+    pub parts: Vec<PartReport>,
+    pub pose: PoseSource,
+    pub method: String,
+    pub three_delta_over_rho: f32,
+    pub margin: f32,
+    /// The completed target skeleton (JSON form).
+    pub skeleton: crate::anatomy::SkeletonJson,
+}
+
+/// A restored statue.
+pub struct Restored {
+    pub cloud: PointCloud,
+    /// Per point: [`FROM_TARGET`] or `1 + donor index`.
+    pub source: Vec<u32>,
+    /// Per point: the bone it came with (target: nearest bone of the completed skeleton;
+    /// donor: the donor bone).
+    pub bone: Vec<u32>,
+    /// The completed target skeleton.
+    pub skeleton: Skeleton,
+    pub report: Report,
+}
+
+/// Restores `target` (fitted as `target_fit`) from `donors`: each part (a connected set of
+/// missing bones, or the bones named in `opts.parts`) is taken from the first donor that has it.
+pub fn restore(
+    target: &PointCloud,
+    target_fit: &Skeleton,
+    donors: &[Donor],
+    opts: &RestoreOptions,
+) -> Result<Restored> {
+    if donors.is_empty() {
+        return Err(Error::input("restore: no donor statue given"));
+    }
+    let t = &target_fit.template;
+    let mut sup = support(target, target_fit)?;
+    if !opts.parts.is_empty() {
+        for s in &mut sup {
+            s.missing = opts.parts.iter().any(|p| p == &s.bone);
+        }
+        for p in &opts.parts {
+            if !sup.iter().any(|s| &s.bone == p) {
+                return Err(Error::input(format!(
+                    "restore: unknown bone '{p}' in template '{}'",
+                    t.name
+                )));
+            }
+        }
+    }
+    let parts: Vec<Part> = parts_from_support(t, &sup);
+    let listed: Vec<String> = sup
+        .iter()
+        .filter(|s| s.missing || s.partial)
+        .map(|s| {
+            format!(
+                "{} ({}, coverage {:.2})",
+                s.bone,
+                if s.missing { "missing" } else { "partial" },
+                s.coverage
+            )
+        })
+        .collect();
+    if parts.is_empty() {
+        return Err(Error::input(
+            "restore: no missing part found on the target (name the bones with --parts)",
+        ));
+    }
+    let redo: Vec<bool> = sup.iter().map(|s| s.missing).collect();
+    let completed = complete(target_fit, &redo);
+    // Start from the target's points.
+    let mut positions = target.positions.clone();
+    let mut normals = target
+        .normals
+        .clone()
+        .unwrap_or_else(|| vec![Vec3::Y; target.len()]);
+    let mut colors = target.colors.clone();
+    let mut source = vec![FROM_TARGET; target.len()];
+    let mut bone = nearest_bones(&positions, &completed);
+    let mut reports = Vec::new();
+    let topts = TransferOptions {
+        pose: opts.pose,
+        ..opts.transfer
+    };
+    // What each donor has (a donor missing a bone of the part cannot give it).
+    let donor_support: Vec<Vec<BoneSupport>> = donors
+        .iter()
+        .map(|d| support(d.cloud, d.fit))
+        .collect::<Result<_>>()?;
+    for part in &parts {
+        let mut last_err = None;
+        let mut done = false;
+        for (di, d) in donors.iter().enumerate() {
+            let lacking: Vec<&str> = part
+                .bones
+                .iter()
+                .filter(|&&k| donor_support[di].get(k).is_some_and(|s| s.missing))
+                .map(|&k| t.bones[k].name.as_str())
+                .collect();
+            if !lacking.is_empty() {
+                last_err = Some(Error::input(format!(
+                    "donor {} lacks {} too",
+                    d.name,
+                    lacking.join(", ")
+                )));
+                continue;
+            }
+            match transfer(&completed, d.cloud, d.fit, part, &topts) {
+                Ok(tr) => {
+                    let n = tr.cloud.len();
+                    positions.extend_from_slice(&tr.cloud.positions);
+                    normals.extend(tr.cloud.normals.clone().unwrap_or_default());
+                    match (&mut colors, &tr.cloud.colors) {
+                        (Some(c), Some(tc)) => c.extend_from_slice(tc),
+                        (Some(c), None) => c.extend(std::iter::repeat_n([200, 200, 200], n)),
+                        _ => {}
+                    }
+                    source.extend(std::iter::repeat_n(di as u32 + 1, n));
+                    bone.extend_from_slice(&tr.bones);
+                    let (_, stats) = merge(
+                        &completed,
+                        part.bones[0],
+                        &part.bones,
+                        topts.margin,
+                        &mut positions,
+                        &opts.merge,
+                    );
+                    reports.push(PartReport {
+                        bones: part
+                            .bones
+                            .iter()
+                            .map(|&k| t.bones[k].name.clone())
+                            .collect(),
+                        attach: part.attach.map(|a| t.bones[a].name.clone()),
+                        donor: d.name.clone(),
+                        source: di as u32 + 1,
+                        points: n,
+                        merge: stats,
+                    });
+                    done = true;
+                    break;
+                }
+                Err(e) => last_err = Some(e),
+            }
+        }
+        if !done {
+            let names: Vec<&str> = part
+                .bones
+                .iter()
+                .map(|&k| t.bones[k].name.as_str())
+                .collect();
+            return Err(Error::input(format!(
+                "no donor can give {}: {} (target support: {})",
+                names.join(", "),
+                last_err.map_or("no donor".to_string(), |e| e.to_string()),
+                listed.join(", ")
+            )));
+        }
+    }
+    if colors.as_ref().is_some_and(|c| c.len() != positions.len()) {
+        colors = None;
+    }
+    let mut cloud = PointCloud::with_normals(positions, normals);
+    cloud.colors = colors;
+    Ok(Restored {
+        report: Report {
+            support: sup,
+            parts: reports,
+            pose: opts.pose,
+            method: topts.method.name().to_string(),
+            three_delta_over_rho: opts.merge.three_delta_over_rho,
+            margin: topts.margin,
+            skeleton: completed.to_json(),
+        },
+        cloud,
+        source,
+        bone,
+        skeleton: completed,
+    })
+}
+
+/// The nearest bone (by signed distance) of every point.
+fn nearest_bones(positions: &[Vec3], skel: &Skeleton) -> Vec<u32> {
+    use rayon::prelude::*;
+    let prepared: Vec<_> = skel
+        .pose()
+        .bones
+        .iter()
+        .map(crate::geometry::Bone::prepare)
+        .collect();
+    positions
+        .par_iter()
+        .map(|&p| {
+            let mut best = (0u32, f32::INFINITY);
+            for (k, b) in prepared.iter().enumerate() {
+                let d = b.sdf_fast(p);
+                if d < best.1 {
+                    best = (k as u32, d);
+                }
+            }
+            best.0
+        })
+        .collect()
+}

@@ -1,0 +1,179 @@
+//! Transferring a part from a donor statue (thesis ch. 5, "Stage 2: pose and anatomy
+//! changes"): the donor's points bound to the part's bones — plus a margin on the bone the part
+//! hangs on, for the overlap — are re-proportioned to the target's sizes (the thesis'
+//! `Scale(l_t/l_c, r_t/r_c)`) and posed like the target (or like the donor for the joints the
+//! target cannot tell), by point-set skinning, in the target's frame:
+//! `p = Skinning(Scale(l_t/l_c, r_t/r_c) p)`.
+//!
+//! **How.** The donor's binding is deformed to a skeleton that is the target's (completed)
+//! skeleton — root placement, every size, every rotation — except, with
+//! [`PoseSource::Donor`], the relative rotations of the part's own bones, taken from the
+//! donor. The part therefore hangs from the target's joint with the target's proportions.
+//! Heightfield skinning is used by default, as in the thesis.
+
+use super::support::BoneSupport;
+use crate::anatomy::{Skeleton, Template};
+use crate::cloud::PointCloud;
+use crate::error::{Error, Result};
+use crate::math::Vec3;
+use crate::skinning::{Binding, Method};
+use serde::Serialize;
+
+/// Where the pose of the transferred part comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PoseSource {
+    /// The target's completed skeleton (its mirror limb, or the rest pose).
+    Keep,
+    /// The donor's own relative rotations for the part's bones.
+    Donor,
+}
+
+/// A part to restore: a connected set of bones hanging from `attach`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Part {
+    /// The part's bones (template indices, parents first).
+    pub bones: Vec<usize>,
+    /// The bone the part hangs on (its root's parent), if any.
+    pub attach: Option<usize>,
+}
+
+/// Groups the missing bones into parts: each missing bone whose parent is present starts a
+/// part, which takes every missing bone below it.
+pub fn parts_from_support(t: &Template, support: &[BoneSupport]) -> Vec<Part> {
+    let missing: Vec<bool> = support.iter().map(|s| s.missing).collect();
+    let mut parts = Vec::new();
+    for (k, def) in t.bones.iter().enumerate() {
+        if !missing[k] || def.parent.is_some_and(|p| missing[p]) {
+            continue;
+        }
+        let mut bones = vec![k];
+        let mut i = 0;
+        while i < bones.len() {
+            for &c in &t.bones[bones[i]].children {
+                if missing[c] {
+                    bones.push(c);
+                }
+            }
+            i += 1;
+        }
+        bones.sort_unstable();
+        parts.push(Part {
+            bones,
+            attach: def.parent,
+        });
+    }
+    parts
+}
+
+/// Options of a transfer.
+#[derive(Clone, Copy, Debug)]
+pub struct TransferOptions {
+    pub pose: PoseSource,
+    /// Fraction of the attach bone's length, from the joint, whose donor points come along for
+    /// the overlap.
+    pub margin: f32,
+    pub method: Method,
+}
+
+impl Default for TransferOptions {
+    fn default() -> Self {
+        TransferOptions {
+            pose: PoseSource::Donor,
+            margin: 0.3,
+            method: Method::Heightfield,
+        }
+    }
+}
+
+/// The donor's points brought to the target.
+#[derive(Clone, Debug)]
+pub struct Transferred {
+    /// Points (with normals) in the target's frame.
+    pub cloud: PointCloud,
+    /// Donor bone of each point.
+    pub bones: Vec<u32>,
+    /// True for the margin points (on the attach bone, for the overlap).
+    pub margin: Vec<bool>,
+}
+
+/// Transfers `part` from the donor (`donor_cloud` fitted as `donor_fit`) to the target whose
+/// completed skeleton is `target`.
+pub fn transfer(
+    target: &Skeleton,
+    donor_cloud: &PointCloud,
+    donor_fit: &Skeleton,
+    part: &Part,
+    opts: &TransferOptions,
+) -> Result<Transferred> {
+    if donor_fit.template.name != target.template.name
+        || donor_fit.bones.len() != target.bones.len()
+    {
+        return Err(Error::input(format!(
+            "the donor is fitted with template '{}' and the target with '{}'",
+            donor_fit.template.name, target.template.name
+        )));
+    }
+    if part.bones.is_empty() {
+        return Err(Error::input("nothing to transfer: the part has no bone"));
+    }
+    let binding = Binding::new(donor_cloud, donor_fit)?;
+    let mut goal = target.clone();
+    if opts.pose == PoseSource::Donor {
+        for &k in &part.bones {
+            goal.bones[k].rotation = donor_fit.bones[k].rotation;
+        }
+        goal.enforce_constraints();
+    }
+    let moved = binding.deform_cloud(&goal, opts.method)?;
+    let labels = &binding.points().bone;
+    let donor_posed = donor_fit.pose();
+    let mut keep = Vec::new();
+    let mut margin = Vec::new();
+    for (i, &b) in labels.iter().enumerate() {
+        let b = b as usize;
+        if part.bones.contains(&b) {
+            keep.push(i);
+            margin.push(false);
+        } else if Some(b) == part.attach {
+            // Near the joint the part hangs from: the last `margin` of the attach bone.
+            let bone = &donor_posed.bones[b];
+            let axis = bone.c2 - bone.c1;
+            let l2 = axis.length_squared().max(1e-24);
+            let f = (donor_cloud.positions[i] - bone.c1).dot(axis) / l2;
+            if f >= 1.0 - opts.margin {
+                keep.push(i);
+                margin.push(true);
+            }
+        }
+    }
+    let on_part = keep
+        .iter()
+        .filter(|&&i| part.bones.contains(&(labels[i] as usize)))
+        .count();
+    if on_part == 0 {
+        let names: Vec<&str> = part
+            .bones
+            .iter()
+            .map(|&k| target.template.bones[k].name.as_str())
+            .collect();
+        return Err(Error::input(format!(
+            "the donor has no points on {} (is that part missing on the donor too?)",
+            names.join(", ")
+        )));
+    }
+    let positions: Vec<Vec3> = keep.iter().map(|&i| moved.positions[i]).collect();
+    let normals: Vec<Vec3> = keep
+        .iter()
+        .map(|&i| moved.normals.as_ref().map_or(Vec3::Y, |n| n[i]))
+        .collect();
+    let mut cloud = PointCloud::with_normals(positions, normals);
+    if let Some(c) = &donor_cloud.colors {
+        cloud.colors = Some(keep.iter().map(|&i| c[i]).collect());
+    }
+    Ok(Transferred {
+        cloud,
+        bones: keep.iter().map(|&i| labels[i] as u32).collect(),
+        margin,
+    })
+}

@@ -1,0 +1,355 @@
+//! The kiosk's GPU renderer on the bundled demo statue, through the real binary
+//! (`pygmalion kiosk --screenshot`).
+//!
+//! Runs only when `PYGMALION_RENDER_TESTS=1` (it needs a display and Vulkan: `tests/run.sh`
+//! installs Xvfb and Mesa's software Vulkan, starts Xvfb and sets the variable). The binary is
+//! spawned rather than run in-process: winit wants its event loop on the main thread, which the
+//! test harness does not give, and a separate process can be stopped if it hangs.
+
+use crate::common::{root, scratch};
+use pygmalion::render::Image;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+const BACKGROUND: [u8; 3] = [24, 26, 32];
+const WIDTH: u32 = 1280;
+const HEIGHT: u32 = 800;
+
+fn enabled() -> bool {
+    std::env::var("PYGMALION_RENDER_TESTS").as_deref() == Ok("1")
+}
+
+fn is_background(c: [u8; 3]) -> bool {
+    c.iter()
+        .zip(BACKGROUND)
+        .all(|(&a, b)| (a as i32 - b as i32).abs() <= 3)
+}
+
+/// Fraction of the pixels of a rectangle (fractions of the image) that satisfy `f`.
+fn fraction(img: &Image, x: (f32, f32), y: (f32, f32), f: impl Fn([u8; 3]) -> bool) -> f32 {
+    let (w, h) = (img.width as f32, img.height as f32);
+    let (x0, x1) = ((x.0 * w) as u32, (x.1 * w) as u32);
+    let (y0, y1) = ((y.0 * h) as u32, (y.1 * h) as u32);
+    let mut n = 0;
+    let mut hit = 0;
+    for yy in y0..y1 {
+        for xx in x0..x1 {
+            if let Some(c) = img.get(xx, yy) {
+                n += 1;
+                hit += f(c) as u32;
+            }
+        }
+    }
+    hit as f32 / n.max(1) as f32
+}
+
+/// Runs the kiosk binary with `args`, at most `limit`; returns (success, log).
+fn run_kiosk(dir: &Path, args: &[&str], limit: Duration) -> (bool, String) {
+    let out = std::fs::File::create(dir.join("kiosk.log")).expect("log file");
+    let err = out.try_clone().expect("log file");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_pygmalion"))
+        .args(args)
+        .current_dir(dir)
+        .stdin(Stdio::null())
+        .stdout(out)
+        .stderr(err)
+        .spawn()
+        .expect("start the pygmalion binary");
+    let start = Instant::now();
+    let ok = loop {
+        match child.try_wait().expect("wait for the kiosk") {
+            Some(status) => break status.success(),
+            None if start.elapsed() > limit => {
+                let _ = child.kill();
+                let _ = child.wait();
+                break false;
+            }
+            None => std::thread::sleep(Duration::from_millis(100)),
+        }
+    };
+    let log = std::fs::read_to_string(dir.join("kiosk.log")).unwrap_or_default();
+    (ok, log)
+}
+
+#[test]
+fn kiosk_screenshot_shows_the_lit_statue_and_its_bones_while_fitting() {
+    if !enabled() {
+        println!(
+            "skipped: the kiosk rendering test needs a display and Vulkan \
+             (set PYGMALION_RENDER_TESTS=1, as tests/run.sh does)"
+        );
+        return;
+    }
+    let dir = scratch("kiosk_render");
+    let assets = root().join("assets");
+    let config = dir.join("kiosk.toml");
+    std::fs::write(
+        &config,
+        format!(
+            r#"assets_root = "{assets}"
+cache_dir = "{cache}"
+
+[[statues]]
+file = "statues/statue_dancing_girl_thorvaldsen.ply"
+template = "human"
+title = "Dancing Girl"
+credit = "Bertel Thorvaldsen · scan Geoffrey Marchal, CC BY 4.0"
+
+[budget]
+point_budget = 100000
+
+[render]
+background = [{r}, {g}, {b}]
+
+[window]
+fullscreen = false
+width = {WIDTH}
+height = {HEIGHT}
+"#,
+            assets = assets.display(),
+            cache = dir.join("cache").display(),
+            r = BACKGROUND[0],
+            g = BACKGROUND[1],
+            b = BACKGROUND[2],
+        ),
+    )
+    .expect("write the kiosk configuration");
+    let shot = dir.join("shot.png");
+    let (ok, log) = run_kiosk(
+        &dir,
+        &[
+            "kiosk",
+            "--config",
+            config.to_str().expect("utf-8 path"),
+            "--screenshot",
+            shot.to_str().expect("utf-8 path"),
+            "--frames",
+            "12",
+        ],
+        Duration::from_secs(300),
+    );
+    assert!(ok, "the kiosk failed or hung; its log:\n{log}");
+    let img = Image::load_png(&shot).expect("the screenshot is a PNG");
+    assert_eq!((img.width, img.height), (WIDTH, HEIGHT), "window size");
+
+    // The statue stands in the middle: most of the centre is covered.
+    let centre = fraction(&img, (0.45, 0.55), (0.3, 0.7), |c| !is_background(c));
+    assert!(
+        centre > 0.6,
+        "only {:.0}% of the centre differs from the background",
+        100.0 * centre
+    );
+    // Upright (tall and narrow): a central column is covered over half the height, while the
+    // margins beside it at the same heights stay empty.
+    let column = fraction(&img, (0.49, 0.51), (0.25, 0.75), |c| !is_background(c));
+    assert!(
+        column > 0.8,
+        "central column covered {:.0}%",
+        100.0 * column
+    );
+    // The corners of the scene (the side margins at a quarter and three quarters of the height:
+    // the window's own corners hold the interface) are background.
+    for (x, y) in [
+        ((0.01, 0.08), (0.2, 0.3)),
+        ((0.92, 0.99), (0.2, 0.3)),
+        ((0.01, 0.08), (0.7, 0.8)),
+        ((0.92, 0.99), (0.7, 0.8)),
+    ] {
+        let bg = fraction(&img, x, y, is_background);
+        assert!(
+            bg > 0.98,
+            "corner patch {x:?} × {y:?} is only {:.0}% background",
+            100.0 * bg
+        );
+    }
+    // Lit: the stone is shaded, not one flat colour (light and dark greys in the centre).
+    let light = fraction(&img, (0.4, 0.6), (0.25, 0.75), |c| {
+        c[1] > 150 && (c[0] as i32 - c[2] as i32).abs() < 50
+    });
+    let dark = fraction(&img, (0.4, 0.6), (0.25, 0.75), |c| {
+        !is_background(c) && c[1] < 110
+    });
+    assert!(
+        light > 0.02 && dark > 0.002,
+        "the statue looks flat (light {light:.3}, dark {dark:.3})"
+    );
+    // Bones are shown while the statue is being fitted (translucent orange).
+    let orange = fraction(&img, (0.25, 0.75), (0.15, 0.9), |c| {
+        c[0] as i32 > c[1] as i32 + 30 && c[1] as i32 > c[2] as i32 + 15
+    });
+    assert!(
+        orange > 0.01,
+        "no bones to be seen while fitting ({:.2}% orange)",
+        100.0 * orange
+    );
+}
+
+// The renderer's CPU-side pieces (no GPU needed).
+
+mod parts {
+    use bevy::asset::RenderAssetUsages;
+    use bevy::image::Image as BevyImage;
+    use bevy::math::Vec3;
+    use bevy::mesh::{Mesh, VertexAttributeValues};
+    use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
+    use pygmalion::kiosk::render::{
+        ATTRIBUTE_SPLAT_COLOR, CORNERS, bone_transform, bones_visible, budget_indices, capture_rgb,
+        cone_geometry, splat_mesh, splat_radius, write_points,
+    };
+    use pygmalion::kiosk::{SkinnedPoints, StatueState};
+
+    fn points(n: usize) -> SkinnedPoints {
+        SkinnedPoints {
+            positions: (0..n).map(|i| Vec3::new(i as f32, 0.5, -1.0)).collect(),
+            normals: (0..n).map(|_| Vec3::Y).collect(),
+            colors: Some((0..n).map(|i| [i as u8, 2, 3]).collect()),
+            version: 1,
+            scratch: Default::default(),
+        }
+    }
+
+    fn f3(mesh: &Mesh, a: bevy::mesh::MeshVertexAttribute) -> Vec<[f32; 3]> {
+        match mesh.attribute(a) {
+            Some(VertexAttributeValues::Float32x3(v)) => v.clone(),
+            other => panic!("unexpected attribute {other:?}"),
+        }
+    }
+
+    #[test]
+    fn splat_mesh_has_four_corners_per_point_and_is_rewritten_in_place() {
+        let mut p = points(5);
+        let mut mesh = splat_mesh(&p, None);
+        let pos = f3(&mesh, Mesh::ATTRIBUTE_POSITION);
+        assert_eq!(pos.len(), 20);
+        for (i, quad) in pos.chunks(4).enumerate() {
+            assert!(quad.iter().all(|v| *v == [i as f32, 0.5, -1.0]));
+        }
+        match mesh.attribute(Mesh::ATTRIBUTE_UV_0) {
+            Some(VertexAttributeValues::Float32x2(uv)) => {
+                assert_eq!(&uv[4..8], &CORNERS[..]);
+            }
+            other => panic!("corners: {other:?}"),
+        }
+        match mesh.attribute(ATTRIBUTE_SPLAT_COLOR) {
+            Some(VertexAttributeValues::Unorm8x4(c)) => assert_eq!(c[13], [3, 2, 3, 255]),
+            other => panic!("colours: {other:?}"),
+        }
+        assert_eq!(mesh.indices().map(|i| i.len()), Some(30));
+
+        // A new pose: the same vectors are overwritten (no reallocation).
+        let before = match mesh.attribute(Mesh::ATTRIBUTE_POSITION) {
+            Some(VertexAttributeValues::Float32x3(v)) => v.as_ptr(),
+            _ => unreachable!(),
+        };
+        for (q, n) in p.positions.iter_mut().zip(p.normals.iter_mut()) {
+            *q += Vec3::X * 10.0;
+            *n = Vec3::Z;
+        }
+        assert!(write_points(&mut mesh, &p, None));
+        let after = match mesh.attribute(Mesh::ATTRIBUTE_POSITION) {
+            Some(VertexAttributeValues::Float32x3(v)) => v.as_ptr(),
+            _ => unreachable!(),
+        };
+        assert_eq!(before, after, "the position buffer was reallocated");
+        assert_eq!(f3(&mesh, Mesh::ATTRIBUTE_POSITION)[19], [14.0, 0.5, -1.0]);
+        assert_eq!(f3(&mesh, Mesh::ATTRIBUTE_NORMAL)[0], [0.0, 0.0, 1.0]);
+
+        // A buffer of another size is refused (the renderer rebuilds the mesh then).
+        assert!(!write_points(&mut mesh, &points(6), None));
+    }
+
+    #[test]
+    fn point_budget_strides_over_the_whole_buffer() {
+        assert_eq!(budget_indices(10, 20), None);
+        assert_eq!(budget_indices(10, 0), None);
+        let k = budget_indices(10, 4).expect("subset");
+        assert_eq!(k, vec![0, 2, 5, 7]);
+        let p = points(10);
+        let mesh = splat_mesh(&p, Some(&k));
+        let pos = f3(&mesh, Mesh::ATTRIBUTE_POSITION);
+        assert_eq!(pos.len(), 16);
+        assert_eq!(pos[12], [7.0, 0.5, -1.0]);
+    }
+
+    #[test]
+    fn splat_radius_follows_the_point_density_and_the_scale() {
+        // A 1 × 1 square sampled by a 100 × 100 grid: spacing 0.01.
+        let grid: Vec<Vec3> = (0..10_000)
+            .map(|i| Vec3::new((i % 100) as f32 / 99.0, (i / 100) as f32 / 99.0, 0.0))
+            .collect();
+        let r = splat_radius(&grid, 1.0);
+        assert!((r - 0.015).abs() < 1e-3, "radius {r}");
+        assert!((splat_radius(&grid, 2.0) - 2.0 * r).abs() < 1e-6);
+        // Nonsense scales fall back to 1; a degenerate cloud still gets a radius.
+        assert_eq!(splat_radius(&grid, f32::NAN), r);
+        assert!(splat_radius(&[Vec3::ZERO], 1.0) > 0.0);
+    }
+
+    #[test]
+    fn bone_cone_is_tangent_to_both_spheres() {
+        let (l, r1, r2) = (2.0f32, 0.6f32, 0.2f32);
+        let mut pos = vec![[0.0; 3]; 50];
+        let mut nrm = vec![[0.0; 3]; 50];
+        cone_geometry(l, r1, r2, &mut pos, &mut nrm);
+        for k in 0..25 {
+            let a = Vec3::from_array(pos[2 * k]);
+            let b = Vec3::from_array(pos[2 * k + 1]);
+            let n = Vec3::from_array(nrm[2 * k]);
+            assert!((n.length() - 1.0).abs() < 1e-5);
+            // On each sphere, with the sphere's normal there equal to the cone's.
+            assert!((a.length() - r1).abs() < 1e-5, "ring 1 off the sphere");
+            let c2 = Vec3::new(0.0, l, 0.0);
+            assert!(
+                ((b - c2).length() - r2).abs() < 1e-5,
+                "ring 2 off the sphere"
+            );
+            assert!((a / r1 - n).length() < 1e-5);
+            assert!(((b - c2) / r2 - n).length() < 1e-5);
+        }
+        // One sphere inside the other: no cone.
+        cone_geometry(0.1, 1.0, 0.2, &mut pos, &mut nrm);
+        assert!(pos.iter().all(|p| *p == [0.0; 3]));
+        // The bone entity's frame: origin at c1, +Y along the bone.
+        let t = bone_transform(Vec3::new(1.0, 2.0, 3.0), Vec3::new(1.0, 2.0, 1.0));
+        assert_eq!(t.translation, Vec3::new(1.0, 2.0, 3.0));
+        assert!((t.rotation * Vec3::Y - Vec3::NEG_Z).length() < 1e-5);
+    }
+
+    #[test]
+    fn bones_show_while_fitting_posing_or_toggled() {
+        let ready = StatueState::Ready;
+        let fitting = StatueState::Fitting { units: 3 };
+        assert!(!bones_visible(false, Some(&ready), false));
+        assert!(bones_visible(true, Some(&ready), false));
+        assert!(bones_visible(false, Some(&ready), true));
+        assert!(bones_visible(false, Some(&fitting), false));
+        assert!(bones_visible(false, Some(&StatueState::Binding), false));
+        assert!(!bones_visible(false, Some(&StatueState::Loading), false));
+    }
+
+    #[test]
+    fn captures_become_rgb_whatever_the_channel_order() {
+        let image = |format| {
+            BevyImage::new(
+                Extent3d {
+                    width: 2,
+                    height: 1,
+                    depth_or_array_layers: 1,
+                },
+                TextureDimension::D2,
+                vec![10, 20, 30, 255, 40, 50, 60, 255],
+                format,
+                RenderAssetUsages::MAIN_WORLD,
+            )
+        };
+        assert_eq!(
+            capture_rgb(&image(TextureFormat::Rgba8UnormSrgb)),
+            Ok((2, 1, vec![10, 20, 30, 40, 50, 60]))
+        );
+        assert_eq!(
+            capture_rgb(&image(TextureFormat::Bgra8UnormSrgb)),
+            Ok((2, 1, vec![30, 20, 10, 60, 50, 40]))
+        );
+    }
+}

@@ -1,0 +1,257 @@
+//! Virtual restoration (`src/restore`): support and missing bones, part transfer, merge — on
+//! synthetic statues whose skeletons are known, so what is measured is the restoration itself.
+
+use pygmalion::anatomy::Template;
+use pygmalion::geometry::Bone;
+use pygmalion::math::Vec3;
+use pygmalion::restore::support::support;
+use pygmalion::restore::transfer::PoseSource;
+use pygmalion::restore::{Donor, FROM_TARGET, RestoreOptions, restore};
+use pygmalion::rng::Rng;
+use pygmalion::synth::{Cut, SynthOptions, SynthStatue, generate};
+use std::sync::Arc;
+
+fn statue(seed: u64, cuts: &[&str]) -> SynthStatue {
+    let t = Arc::new(Template::builtin("human").unwrap());
+    generate(
+        t,
+        &SynthOptions {
+            points: 20_000,
+            seed,
+            cuts: cuts.iter().map(|c| Cut::parse(c).unwrap()).collect(),
+            ..Default::default()
+        },
+    )
+    .unwrap()
+}
+
+fn missing(st: &SynthStatue) -> Vec<String> {
+    support(&st.cloud, &st.truth)
+        .unwrap()
+        .into_iter()
+        .filter(|b| b.missing)
+        .map(|b| b.bone)
+        .collect()
+}
+
+#[test]
+fn the_missing_bones_are_the_cut_ones() {
+    let full = statue(5, &[]);
+    assert!(missing(&full).is_empty(), "{:?}", missing(&full));
+    let st = statue(5, &["bone:l_forearm", "bone:l_hand"]);
+    assert_eq!(missing(&st), ["l_forearm", "l_hand"]);
+    let st = statue(8, &["bone:r_shin", "bone:r_foot"]);
+    assert_eq!(missing(&st), ["r_shin", "r_foot"]);
+}
+
+/// Signed distance to the union of a skeleton's bones.
+fn sdf(p: Vec3, bones: &[pygmalion::geometry::bone::PreparedBone]) -> f32 {
+    bones
+        .iter()
+        .map(|b| b.sdf_fast(p))
+        .fold(f32::INFINITY, f32::min)
+}
+
+#[test]
+fn a_cut_forearm_is_restored_from_a_different_donor_in_a_single_layer() {
+    let target = statue(5, &["bone:l_forearm", "bone:l_hand"]);
+    let donor = statue(9, &[]);
+    let r = restore(
+        &target.cloud,
+        &target.truth,
+        &[Donor {
+            name: "donor".into(),
+            cloud: &donor.cloud,
+            fit: &donor.truth,
+        }],
+        &RestoreOptions {
+            pose: PoseSource::Keep,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(r.report.parts.len(), 1);
+    assert_eq!(r.report.parts[0].bones, ["l_forearm", "l_hand"]);
+    let n_target = r.source.iter().filter(|&&s| s == FROM_TARGET).count();
+    assert_eq!(n_target, target.cloud.len(), "every target point is kept");
+    let posed = r.skeleton.pose();
+    let bones: Vec<_> = posed.bones.iter().map(Bone::prepare).collect();
+    // The new points lie on the completed statue's surface (height 1).
+    let mut d: Vec<f32> = r
+        .cloud
+        .positions
+        .iter()
+        .zip(&r.source)
+        .filter(|(_, s)| **s != FROM_TARGET)
+        .map(|(p, _)| sdf(*p, &bones).abs())
+        .collect();
+    d.sort_by(f32::total_cmp);
+    let p95 = d[d.len() * 95 / 100];
+    println!(
+        "donor points: {}, |distance| median {:.5} p95 {:.5}",
+        d.len(),
+        d[d.len() / 2],
+        p95
+    );
+    assert!(p95 < 0.004, "p95 distance to the surface {p95}");
+    // Single layer at the seam: every point of the overlap is on the surface.
+    let stats = r.report.parts[0].merge;
+    println!("{stats:?}");
+    assert!(stats.overlap_points > 50);
+    // Coverage: the restored forearm and hand's visible surface is covered.
+    let tol = 3.0 * stats.rho;
+    let mut rng = Rng::new(3);
+    let (mut seen, mut hit) = (0, 0);
+    for name in ["l_forearm", "l_hand"] {
+        let k = r
+            .skeleton
+            .template
+            .bones
+            .iter()
+            .position(|b| b.name == name)
+            .unwrap();
+        for _ in 0..400 {
+            let (p, _) = bones[k].sample_surface(&mut rng);
+            if bones
+                .iter()
+                .enumerate()
+                .any(|(j, b)| j != k && b.sdf_fast(p) < 0.0)
+            {
+                continue;
+            }
+            seen += 1;
+            if r.cloud.positions.iter().any(|q| (*q - p).length() < tol) {
+                hit += 1;
+            }
+        }
+    }
+    let coverage = hit as f32 / seen as f32;
+    println!("coverage of the restored part: {coverage:.3}");
+    assert!(coverage > 0.9, "coverage {coverage}");
+}
+
+/// The `restore` command: provenance in the PLY, the JSON report, and clear refusals.
+#[test]
+fn restore_command_writes_provenance_and_refuses_impossible_requests() {
+    use pygmalion::cli::run;
+    use pygmalion::cloud::ply::{WriteOptions, read_ply_with_property, write_ply};
+    let dir = crate::common::scratch("restore_cli");
+    let target = statue(5, &["bone:l_forearm", "bone:l_hand"]);
+    let donor = statue(9, &[]);
+    let broken_donor = statue(9, &["bone:l_forearm", "bone:l_hand"]);
+    let p = |n: &str| dir.join(n).to_str().unwrap().to_string();
+    write_ply(p("t.ply"), &target.cloud, &WriteOptions::default()).unwrap();
+    write_ply(p("d.ply"), &donor.cloud, &WriteOptions::default()).unwrap();
+    write_ply(p("b.ply"), &broken_donor.cloud, &WriteOptions::default()).unwrap();
+    target.truth.save_json(p("t.json")).unwrap();
+    donor.truth.save_json(p("d.json")).unwrap();
+    broken_donor.truth.save_json(p("b.json")).unwrap();
+    let args = |extra: &[&str]| -> Vec<String> {
+        ["pygmalion", "restore"]
+            .iter()
+            .map(|s| s.to_string())
+            .chain(extra.iter().map(|s| s.to_string()))
+            .collect()
+    };
+    run(args(&[
+        &p("t.ply"),
+        "--fit",
+        &p("t.json"),
+        "--donor",
+        &p("d.ply"),
+        "--donor-fit",
+        &p("d.json"),
+        "--out",
+        &p("out.ply"),
+        "--report",
+        &p("r.json"),
+    ]))
+    .unwrap();
+    let (cloud, prov) = read_ply_with_property(
+        p("out.ply"),
+        &pygmalion::cloud::ply::ReadOptions::default(),
+        "provenance",
+    )
+    .unwrap();
+    let prov: Vec<u32> = prov.iter().map(|&v| v as u32).collect();
+    assert_eq!(cloud.len(), prov.len());
+    let from_donor = prov.iter().filter(|&&v| v >= 256).count();
+    assert_eq!(cloud.len() - from_donor, target.cloud.len());
+    let forearm = target
+        .truth
+        .template
+        .bones
+        .iter()
+        .position(|b| b.name == "l_forearm")
+        .unwrap();
+    assert!(
+        prov.iter().any(|&v| v == 256 + forearm as u32),
+        "donor forearm points are labelled"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(p("r.json")).unwrap()).unwrap();
+    assert_eq!(report["parts"][0]["bones"][0], "l_forearm");
+    assert_eq!(report["three_delta_over_rho"], 10.0);
+    // A donor without that part.
+    let err = run(args(&[
+        &p("t.ply"),
+        "--fit",
+        &p("t.json"),
+        "--donor",
+        &p("b.ply"),
+        "--donor-fit",
+        &p("b.json"),
+        "--out",
+        &p("x.ply"),
+    ]))
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("l_forearm") && err.contains("donor"), "{err}");
+    // Nothing missing on a complete statue.
+    let err = run(args(&[
+        &p("d.ply"),
+        "--fit",
+        &p("d.json"),
+        "--donor",
+        &p("t.ply"),
+        "--donor-fit",
+        &p("t.json"),
+        "--out",
+        &p("x.ply"),
+    ]))
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("no missing part"), "{err}");
+    // Unknown bone, bad pose source, different templates.
+    let err = run(args(&[
+        &p("t.ply"),
+        "--fit",
+        &p("t.json"),
+        "--donor",
+        &p("d.ply"),
+        "--donor-fit",
+        &p("d.json"),
+        "--parts",
+        "l_wing",
+        "--out",
+        &p("x.ply"),
+    ]))
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("l_wing"), "{err}");
+    let err = run(args(&[
+        &p("t.ply"),
+        "--fit",
+        &p("t.json"),
+        "--donor",
+        &p("d.ply"),
+        "--pose",
+        "sideways",
+        "--out",
+        &p("x.ply"),
+    ]))
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("sideways"), "{err}");
+    assert!(!dir.join("x.ply").exists());
+}
