@@ -508,6 +508,13 @@ impl Proportions {
     }
 }
 
+/// Smooth ease-in-out for pose changes: the cubic `3t² − 2t³` on `[0, 1]` (zero speed at
+/// both ends; the same cubic as the thesis' `α_p` of baseline skinning).
+pub fn ease(t: f32) -> f32 {
+    let t = t.clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
 /// The skeleton between `a` (`t = 0`) and `b` (`t = 1`), two skeletons of the same template:
 /// per-bone slerp of the relative rotations, lerp of lengths and radii, and the same for the
 /// root placement and block scale. `t` is clamped to `[0, 1]` (ease it before calling); the

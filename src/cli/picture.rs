@@ -14,7 +14,7 @@
 //! `+Y`); without one it looks along `−Z` with `+Y` up (the data set's convention).
 
 use crate::anatomy::Skeleton;
-use crate::anatomy::pose::interpolate;
+use crate::anatomy::pose::{ease, interpolate};
 use crate::cloud::PointCloud;
 use crate::cloud::normals::{NormalOptions, ensure_normals};
 use crate::error::{Error, Result};
@@ -188,12 +188,6 @@ pub fn run_picture(a: &PictureArgs) -> Result<()> {
             .join(", ")
     );
     Ok(())
-}
-
-/// Smooth ease-in-out (cubic).
-pub fn ease(t: f32) -> f32 {
-    let t = t.clamp(0.0, 1.0);
-    t * t * (3.0 - 2.0 * t)
 }
 
 /// Runs `film`.

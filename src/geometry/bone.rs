@@ -554,3 +554,16 @@ impl PreparedBone {
         }
     }
 }
+
+/// The bone of `bones` whose surface is nearest to `p` by (fast) signed distance — for a point
+/// inside overlapping bones, the deepest one — with that distance. `(0, ∞)` without bones.
+pub fn nearest_bone(bones: &[PreparedBone], p: Vec3) -> (usize, f32) {
+    let mut best = (0, f32::INFINITY);
+    for (k, b) in bones.iter().enumerate() {
+        let d = b.sdf_fast(p);
+        if d < best.1 {
+            best = (k, d);
+        }
+    }
+    best
+}

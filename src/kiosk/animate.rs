@@ -7,7 +7,7 @@ use super::{
     CurrentPose, FittedSkeleton, KioskSet, PoseAnimation, PoseRequested, ResetRequested, Settings,
     SkinnedPoints, StatueBinding,
 };
-use crate::anatomy::pose::{Pose, interpolate};
+use crate::anatomy::pose::{Pose, ease, interpolate};
 use crate::skinning::Method;
 use bevy::prelude::*;
 use std::time::Instant;
@@ -46,12 +46,6 @@ impl Plugin for AnimatePlugin {
 
 fn init_method(mut commands: Commands, settings: Res<Settings>) {
     commands.insert_resource(SkinMethod(settings.0.skinning.method));
-}
-
-/// Smooth ease-in-out.
-pub fn ease(t: f32) -> f32 {
-    let t = t.clamp(0.0, 1.0);
-    t * t * (3.0 - 2.0 * t)
 }
 
 fn request_poses(

@@ -54,15 +54,7 @@ pub struct MergeStats {
 
 /// The nearest bone (by signed distance) of `p` and its orthogonal projection.
 fn base(p: Vec3, bones: &[PreparedBone]) -> (usize, Vec3, Vec3, f32) {
-    let mut best = 0;
-    let mut best_d = f32::INFINITY;
-    for (k, b) in bones.iter().enumerate() {
-        let d = b.sdf_fast(p);
-        if d < best_d {
-            best_d = d;
-            best = k;
-        }
-    }
+    let (best, _) = crate::geometry::bone::nearest_bone(bones, p);
     let pr = bones[best].project(p);
     let h = (p - pr.point).dot(pr.normal);
     (best, pr.point, pr.normal, h)

@@ -265,15 +265,6 @@ fn nearest_bones(positions: &[Vec3], skel: &Skeleton) -> Vec<u32> {
         .collect();
     positions
         .par_iter()
-        .map(|&p| {
-            let mut best = (0u32, f32::INFINITY);
-            for (k, b) in prepared.iter().enumerate() {
-                let d = b.sdf_fast(p);
-                if d < best.1 {
-                    best = (k as u32, d);
-                }
-            }
-            best.0
-        })
+        .map(|&p| crate::geometry::bone::nearest_bone(&prepared, p).0 as u32)
         .collect()
 }

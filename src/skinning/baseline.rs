@@ -557,8 +557,7 @@ fn grid_fetch(cell: u32, [fu, fv]: [f32; 2], grid: &[Cell]) -> Cell {
 /// Cubic interpolation `α(t) = 3t² − 2t³` on `[0, 1]`.
 #[inline]
 fn alpha(t: f32) -> f32 {
-    let t = t.clamp(0.0, 1.0);
-    t * t * (3.0 - 2.0 * t)
+    crate::anatomy::pose::ease(t)
 }
 
 /// Encodes one point of bone `k` (base point `b` and point `p`, both bone-local) on its fitted

@@ -335,16 +335,7 @@ fn bind_point(
     defs: &[crate::anatomy::template::BoneDef],
 ) -> Rec {
     // Nearest bone by (fast) signed distance, then the exact projection on it.
-    let mut best = 0;
-    let mut best_d = f32::INFINITY;
-    for (k, pb) in prepared.iter().enumerate() {
-        let d = pb.sdf_fast(p);
-        if d < best_d {
-            best_d = d;
-            best = k;
-        }
-    }
-    let k = best;
+    let (k, _) = crate::geometry::bone::nearest_bone(prepared, p);
     let proj = prepared[k].project(p);
     let bb = &bones[k];
     let inv = bb.frame.inverse();
