@@ -274,20 +274,16 @@ fn run_files(files: &[std::path::PathBuf], min_sign: f64, max_angle: f64) {
             a.median_angle_deg,
             ms
         );
-        // A reference whose own normals contradict their neighbourhood on more than 1% of the
-        // points cannot grade at the 97% level: the bar is lowered by that fraction, loudly.
+        // Some references contradict their own neighbourhood (Theodoric: 2.8% of its normals);
+        // that is reported, but every file is held to the issue's bar all the same.
         let inconsistency = reference_inconsistency(&pos, &reference);
-        let bar = if inconsistency > 0.01 {
+        if inconsistency > 0.01 {
             println!(
-                "  ! {name}: {:.2}% of the file's own normals point against their neighbourhood; \
-                 graded at {:.4} instead of {min_sign}",
-                100.0 * inconsistency,
-                min_sign - inconsistency
+                "  ! {name}: {:.2}% of the file's own normals point against their neighbourhood",
+                100.0 * inconsistency
             );
-            min_sign - inconsistency
-        } else {
-            min_sign
-        };
+        }
+        let bar = min_sign;
         if a.sign_agreement < bar || a.median_angle_deg >= max_angle {
             failures.push(format!("{name}: {a:?} (bar {bar:.4})"));
         }
