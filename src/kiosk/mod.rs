@@ -84,7 +84,7 @@ pub struct Statue {
 pub enum StatueState {
     /// The file is being read (and normals estimated) off the main thread.
     Loading,
-    /// FAKIR is running, a budget per frame; `fraction` is a rough progress in `[0, 1]`.
+    /// FAKIR is running, a budget per frame; `units` counts the work units done so far.
     Fitting { units: u64 },
     /// The fit is done; the binding is being built off the main thread.
     Binding,

@@ -78,19 +78,22 @@ pub fn merge(
     let l_attach = attach.map_or(0.0, |a| skeleton.bones[a].length);
     let radius = posed.bones[part_root].r1 + margin * l_attach;
     // The overlap's points with their base points.
-    let info: Vec<(usize, Vec3, Vec3, f32)> =
-        positions.par_iter().map(|&p| base(p, &prepared)).collect();
-    let zone: Vec<usize> = (0..positions.len())
-        .filter(|&i| {
-            let (b, _, _, _) = info[i];
-            (zone_bones.contains(&b) || Some(b) == attach) && (positions[i] - j).length() <= radius
-        })
+    // Only points near the joint can be in the overlap: base points for those alone.
+    let near: Vec<usize> = (0..positions.len())
+        .filter(|&i| (positions[i] - j).length() <= radius)
         .collect();
+    let based: Vec<(usize, (usize, Vec3, Vec3, f32))> = near
+        .par_iter()
+        .map(|&i| (i, base(positions[i], &prepared)))
+        .filter(|(_, (b, _, _, _))| zone_bones.contains(b) || Some(*b) == attach)
+        .collect();
+    let zone: Vec<usize> = based.iter().map(|(i, _)| *i).collect();
+    let info: Vec<(usize, Vec3, Vec3, f32)> = based.iter().map(|(_, x)| *x).collect();
     if zone.len() < 2 {
         return (zone, MergeStats::default());
     }
     let zp: Vec<[f32; 3]> = zone.iter().map(|&i| positions[i].to_array()).collect();
-    let zb: Vec<[f32; 3]> = zone.iter().map(|&i| info[i].1.to_array()).collect();
+    let zb: Vec<[f32; 3]> = info.iter().map(|x| x.1.to_array()).collect();
     let (Ok(tree_p), Ok(tree_b)) = (
         ImmutableKdTree::<f32, 3>::new_from_slice(&zp),
         ImmutableKdTree::<f32, 3>::new_from_slice(&zb),
@@ -111,7 +114,7 @@ pub fn merge(
         .sum::<f32>()
         / zp.len() as f32;
     let td = (opts.three_delta_over_rho * rho).max(1e-9);
-    let heights: Vec<f32> = zone.iter().map(|&i| info[i].3).collect();
+    let heights: Vec<f32> = info.iter().map(|x| x.3).collect();
     // Pass 1 (eq. 5.1): the upper layer's Gaussian-weighted height.
     let pass1: Vec<f32> = (0..zone.len())
         .into_par_iter()
@@ -161,7 +164,7 @@ pub fn merge(
     };
     let mut lift = 0.0f64;
     for (a, &i) in zone.iter().enumerate() {
-        let (_, b, n, h) = info[i];
+        let (_, b, n, h) = info[a];
         positions[i] = b + pass2[a] * n;
         lift += (pass2[a] - h).abs() as f64;
     }
