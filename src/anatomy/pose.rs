@@ -523,20 +523,31 @@ pub fn ease(t: f32) -> f32 {
 /// # Panics
 /// When the two skeletons have different numbers of bones.
 pub fn interpolate(a: &Skeleton, b: &Skeleton, t: f32) -> Skeleton {
-    assert_eq!(
-        a.bones.len(),
-        b.bones.len(),
+    let mut out = a.clone();
+    interpolate_into(a, b, t, &mut out);
+    out
+}
+
+/// [`interpolate`] into an existing skeleton of the same template (no allocation: the kiosk
+/// calls it every frame of a pose change).
+///
+/// # Panics
+/// When the three skeletons do not have the same number of bones.
+pub fn interpolate_into(a: &Skeleton, b: &Skeleton, t: f32, out: &mut Skeleton) {
+    assert!(
+        a.bones.len() == b.bones.len() && a.bones.len() == out.bones.len(),
         "interpolate: the skeletons must share their template"
     );
     let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
-    if t == 0.0 {
-        return a.clone();
-    }
-    if t == 1.0 {
-        return b.clone();
+    if t == 0.0 || t == 1.0 {
+        let src = if t == 0.0 { a } else { b };
+        out.root_position = src.root_position;
+        out.root_rotation = src.root_rotation;
+        out.block_scale = src.block_scale;
+        out.bones.copy_from_slice(&src.bones);
+        return;
     }
     let lerp = |x: f32, y: f32| x + (y - x) * t;
-    let mut out = a.clone();
     out.root_position = a.root_position.lerp(b.root_position, t);
     out.root_rotation = a.root_rotation.slerp(b.root_rotation, t).normalize();
     out.block_scale = lerp(a.block_scale, b.block_scale);
@@ -546,5 +557,4 @@ pub fn interpolate(a: &Skeleton, b: &Skeleton, t: f32) -> Skeleton {
         o.r1 = lerp(x.r1, y.r1);
         o.r2 = lerp(x.r2, y.r2);
     }
-    out
 }

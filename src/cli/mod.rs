@@ -472,6 +472,18 @@ pub(crate) fn read(path: &Path, drop_non_finite: bool) -> Result<crate::cloud::P
     )?)
 }
 
+/// Reads a PLY and estimates normals when it has none (the commands that bind or render need
+/// them); returns whether they were estimated.
+pub(crate) fn read_with_normals(
+    path: &Path,
+    drop_non_finite: bool,
+) -> Result<(crate::cloud::PointCloud, bool)> {
+    let mut cloud = read(path, drop_non_finite)?;
+    let estimated = crate::cloud::normals::ensure_normals(&mut cloud, &NormalOptions::default())
+        .map_err(|e| Error::input(format!("{}: {e}", path.display())))?;
+    Ok((cloud, estimated))
+}
+
 fn info(path: &Path, drop_non_finite: bool) -> Result<()> {
     let t = Instant::now();
     let cloud = read(path, drop_non_finite)?;

@@ -16,7 +16,6 @@
 use crate::anatomy::Skeleton;
 use crate::anatomy::pose::{ease, interpolate};
 use crate::cloud::PointCloud;
-use crate::cloud::normals::{NormalOptions, ensure_normals};
 use crate::error::{Error, Result};
 use crate::math::Vec3;
 use crate::render::{Camera, Image, RenderOptions, overlay_segments, overlay_spheres, render};
@@ -66,10 +65,7 @@ fn methods(name: &str) -> Result<Vec<Method>> {
 }
 
 fn read_with_normals(input: &Path) -> Result<PointCloud> {
-    let mut cloud = super::read(input, false)?;
-    ensure_normals(&mut cloud, &NormalOptions::default())
-        .map_err(|e| Error::input(format!("{}: {e}", input.display())))?;
-    Ok(cloud)
+    Ok(super::read_with_normals(input, false)?.0)
 }
 
 /// The camera for a set of clouds seen from the fitted statue's front (or along −Z).

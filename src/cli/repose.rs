@@ -6,7 +6,6 @@
 //! reported at once, naming the file.
 
 use crate::anatomy::{Pose, Proportions, Skeleton, Template};
-use crate::cloud::normals::{NormalOptions, ensure_normals};
 use crate::cloud::ply::{WriteOptions, write_ply};
 use crate::error::{Error, Result};
 use crate::skinning::{Binding, Method};
@@ -62,9 +61,7 @@ pub fn target(
 pub fn run(args: &Args) -> Result<()> {
     let method: Method = args.method.parse()?;
     let (fitted, target) = target(args.fit, args.pose, args.proportions, args.template)?;
-    let mut cloud = super::read(args.input, args.drop_non_finite)?;
-    let estimated = ensure_normals(&mut cloud, &NormalOptions::default())
-        .map_err(|e| Error::input(format!("{}: {e}", args.input.display())))?;
+    let (cloud, estimated) = super::read_with_normals(args.input, args.drop_non_finite)?;
     let start = Instant::now();
     let binding = Binding::new(&cloud, &fitted)
         .map_err(|e| Error::input(format!("{}: cannot bind: {e}", args.input.display())))?;

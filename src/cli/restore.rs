@@ -8,7 +8,6 @@
 
 use crate::anatomy::{Skeleton, Template};
 use crate::cloud::PointCloud;
-use crate::cloud::normals::{NormalOptions, ensure_normals};
 use crate::cloud::ply::{WriteOptions, write_ply};
 use crate::error::{Error, Result};
 use crate::fakir::{Init, RegistrationOptions, register};
@@ -33,10 +32,7 @@ pub struct Args<'a> {
 }
 
 fn read(path: &Path) -> Result<PointCloud> {
-    let mut c = super::read(path, false)?;
-    ensure_normals(&mut c, &NormalOptions::default())
-        .map_err(|e| Error::input(format!("{}: {e}", path.display())))?;
-    Ok(c)
+    Ok(super::read_with_normals(path, false)?.0)
 }
 
 fn fit_or_load(

@@ -7,7 +7,7 @@ use super::{
     CurrentPose, FittedSkeleton, KioskSet, PoseAnimation, PoseRequested, ResetRequested, Settings,
     SkinnedPoints, StatueBinding,
 };
-use crate::anatomy::pose::{Pose, ease, interpolate};
+use crate::anatomy::pose::{Pose, ease, interpolate_into};
 use crate::skinning::Method;
 use bevy::prelude::*;
 use std::time::Instant;
@@ -94,7 +94,7 @@ fn advance_animations(
         } else {
             1.0
         };
-        current.0 = interpolate(&anim.from, &anim.to, ease(t));
+        interpolate_into(&anim.from, &anim.to, ease(t), &mut current.0);
         if t >= 1.0 {
             commands.entity(e).remove::<PoseAnimation>();
         }

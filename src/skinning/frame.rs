@@ -181,7 +181,7 @@ pub fn analyse(
                 a -= tau;
                 b += tau;
             }
-            let dtau = wrap(target.bones[k].rotation_twist() - fitted.bones[k].rotation_twist());
+            let dtau = wrap(twist_x(target.bones[k].rotation) - twist_x(fitted.bones[k].rotation));
             o0 = (1.0 - bb.parent_share) * dtau;
         }
         if let Some(c) = bb.c2_partner {
@@ -195,7 +195,7 @@ pub fn analyse(
                 };
                 b += f * out[c].change_twist;
                 let dtau =
-                    wrap(target.bones[c].rotation_twist() - fitted.bones[c].rotation_twist());
+                    wrap(twist_x(target.bones[c].rotation) - twist_x(fitted.bones[c].rotation));
                 o1 = share * dtau;
             }
         }
@@ -203,16 +203,5 @@ pub fn analyse(
         out[k].twist_b = b;
         out[k].off0 = o0;
         out[k].off1 = o1;
-    }
-}
-
-/// Twist of a bone state's relative rotation about its own axis.
-trait RotationTwist {
-    fn rotation_twist(&self) -> f32;
-}
-
-impl RotationTwist for crate::anatomy::BoneState {
-    fn rotation_twist(&self) -> f32 {
-        twist_x(self.rotation)
     }
 }
