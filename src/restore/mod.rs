@@ -162,6 +162,8 @@ pub fn restore(
         .iter()
         .map(|d| support(d.cloud, d.fit))
         .collect::<Result<_>>()?;
+    // Each donor is bound once, when it first gives a part.
+    let mut bindings: Vec<Option<crate::skinning::Binding>> = donors.iter().map(|_| None).collect();
     for part in &parts {
         let mut last_err = None;
         let mut done = false;
@@ -180,7 +182,11 @@ pub fn restore(
                 )));
                 continue;
             }
-            match transfer(&completed, d.cloud, d.fit, part, &topts) {
+            if bindings[di].is_none() {
+                bindings[di] = Some(crate::skinning::Binding::new(d.cloud, d.fit)?);
+            }
+            let binding = bindings[di].as_ref().expect("bound just above");
+            match transfer(&completed, d.cloud, binding, part, &topts) {
                 Ok(tr) => {
                     let n = tr.cloud.len();
                     positions.extend_from_slice(&tr.cloud.positions);

@@ -97,15 +97,21 @@ pub struct Transferred {
     pub margin: Vec<bool>,
 }
 
-/// Transfers `part` from the donor (`donor_cloud` fitted as `donor_fit`) to the target whose
-/// completed skeleton is `target`.
+/// Transfers `part` from the donor (`donor_cloud`, bound to its fit as `binding` — bind a
+/// donor once for all the parts it gives) to the target whose completed skeleton is `target`.
 pub fn transfer(
     target: &Skeleton,
     donor_cloud: &PointCloud,
-    donor_fit: &Skeleton,
+    binding: &Binding,
     part: &Part,
     opts: &TransferOptions,
 ) -> Result<Transferred> {
+    let donor_fit = binding.fitted();
+    if binding.len() != donor_cloud.len() {
+        return Err(Error::input(
+            "transfer: the binding is not the donor cloud's",
+        ));
+    }
     if donor_fit.template.name != target.template.name
         || donor_fit.bones.len() != target.bones.len()
     {
@@ -117,7 +123,6 @@ pub fn transfer(
     if part.bones.is_empty() {
         return Err(Error::input("nothing to transfer: the part has no bone"));
     }
-    let binding = Binding::new(donor_cloud, donor_fit)?;
     let mut goal = target.clone();
     if opts.pose == PoseSource::Donor {
         for &k in &part.bones {
