@@ -185,6 +185,113 @@ height = {HEIGHT}
     );
 }
 
+#[test]
+fn kiosk_screenshot_shows_ghost_bones_on_a_broken_statue() {
+    use pygmalion::anatomy::Template;
+    use pygmalion::cloud::ply::{WriteOptions, write_ply};
+    use pygmalion::kiosk::config::{KioskConfig, StatueEntry};
+    use pygmalion::kiosk::statue::{load, write_cache};
+    use pygmalion::skinning::Binding;
+    use pygmalion::synth::{Cut, SynthOptions, generate};
+    use std::sync::Arc;
+    if !enabled() {
+        println!("skipped: needs a display and Vulkan (PYGMALION_RENDER_TESTS=1)");
+        return;
+    }
+    let dir = scratch("kiosk_render_ghosts");
+    // A synthetic statue without its left forearm and hand, fitted (its ground truth cached).
+    let t = Arc::new(Template::builtin("human").unwrap());
+    let s = generate(
+        t,
+        &SynthOptions {
+            points: 12_000,
+            seed: 5,
+            cuts: vec![Cut::parse("bone:l_forearm").unwrap()],
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    write_ply(dir.join("broken.ply"), &s.cloud, &WriteOptions::default()).unwrap();
+    let entry = StatueEntry {
+        file: "broken.ply".into(),
+        template: "human".into(),
+        title: "Broken".into(),
+        credit: String::new(),
+        up: None,
+    };
+    let cfg = KioskConfig {
+        assets_root: dir.clone(),
+        cache_dir: dir.join("cache"),
+        ..Default::default()
+    };
+    let l = load(&dir, &cfg.cache_dir, &entry, 100_000).unwrap();
+    write_cache(
+        &cfg.cache_dir,
+        &l.cache_key,
+        &s.truth,
+        &Binding::new(&l.cloud, &s.truth).unwrap(),
+    );
+    let config = dir.join("kiosk.toml");
+    std::fs::write(
+        &config,
+        format!(
+            r#"assets_root = "{root}"
+cache_dir = "{cache}"
+
+[[statues]]
+file = "broken.ply"
+template = "human"
+title = "Broken"
+
+[budget]
+point_budget = 100000
+
+[render]
+background = [{r}, {g}, {b}]
+
+[window]
+width = {WIDTH}
+height = {HEIGHT}
+"#,
+            root = dir.display(),
+            cache = cfg.cache_dir.display(),
+            r = BACKGROUND[0],
+            g = BACKGROUND[1],
+            b = BACKGROUND[2],
+        ),
+    )
+    .unwrap();
+    let shot = dir.join("shot.png");
+    let (ok, log) = run_kiosk(
+        &dir,
+        &[
+            "kiosk",
+            "--config",
+            config.to_str().unwrap(),
+            "--screenshot",
+            shot.to_str().unwrap(),
+            "--frames",
+            "40",
+        ],
+        Duration::from_secs(300),
+    );
+    assert!(ok, "the kiosk failed or hung; its log:\n{log}");
+    assert!(
+        log.contains("missing parts: left forearm and hand"),
+        "{log}"
+    );
+    let img = Image::load_png(&shot).unwrap();
+    // Pale blue ghost bones where the forearm and hand were (the scene, below the hint line):
+    // no other blue in the picture (marble statue, dark background, bones hidden once ready).
+    let blue = |c: [u8; 3]| c[2] as i32 > c[0] as i32 + 25 && c[2] > 70;
+    let ghosts = fraction(&img, (0.2, 0.8), (0.25, 0.95), blue);
+    println!("ghost-blue pixels: {:.3}% of the scene", 100.0 * ghosts);
+    assert!(ghosts > 0.0005, "no ghost bones to be seen");
+    // The statue itself is still drawn.
+    let statue = fraction(&img, (0.45, 0.55), (0.3, 0.7), |c| !is_background(c));
+    assert!(statue > 0.5, "the statue covers {statue:.2} of the centre");
+}
+
 // The renderer's CPU-side pieces (no GPU needed).
 
 mod parts {

@@ -20,6 +20,7 @@ mod kiosk_config;
 mod kiosk_gestures;
 mod kiosk_ik;
 mod kiosk_render;
+mod kiosk_restore;
 mod render;
 mod restore;
 mod skinning;

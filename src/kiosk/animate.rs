@@ -1,12 +1,15 @@
 //! Pose changes and skinning: a requested pose (pose strip, attract mode, reset) becomes a
 //! [`PoseAnimation`] from the current pose to the target, eased over the configured time; every
 //! frame the current pose is re-skinned into the statue's [`SkinnedPoints`] buffers (no
-//! allocation per frame: the binding writes in place).
+//! allocation per frame: the binding writes in place). At exactly the fitted pose the buffers
+//! get the statue's own points ([`StatueCloud`]) instead: the scan as it is, bit for bit (a
+//! swapped-in restoration and its undo show their point sets exactly).
 
 use super::{
     CurrentPose, FittedSkeleton, KioskSet, PoseAnimation, PoseRequested, ResetRequested, Settings,
-    SkinnedPoints, StatueBinding,
+    SkinnedPoints, StatueBinding, StatueCloud,
 };
+use crate::anatomy::Skeleton;
 use crate::anatomy::pose::{Pose, ease, interpolate_into};
 use crate::skinning::Method;
 use bevy::prelude::*;
@@ -101,15 +104,46 @@ fn advance_animations(
     }
 }
 
+/// True when two skeletons are the same state, bit for bit.
+pub fn same_skeleton(a: &Skeleton, b: &Skeleton) -> bool {
+    a.root_position == b.root_position
+        && a.root_rotation == b.root_rotation
+        && a.block_scale == b.block_scale
+        && a.bones == b.bones
+}
+
+#[allow(clippy::type_complexity)]
 fn skin(
-    mut q: Query<(&StatueBinding, &CurrentPose, &mut SkinnedPoints), Changed<CurrentPose>>,
+    mut q: Query<
+        (
+            &StatueBinding,
+            &CurrentPose,
+            &mut SkinnedPoints,
+            Option<&StatueCloud>,
+        ),
+        Changed<CurrentPose>,
+    >,
     method: Option<Res<SkinMethod>>,
     mut work: ResMut<SkinWork>,
 ) {
     let method = method.map(|m| m.0).unwrap_or_default();
-    for (binding, pose, mut points) in &mut q {
+    for (binding, pose, mut points, cloud) in &mut q {
         let start = Instant::now();
         let p = &mut *points;
+        // At the fitted pose: the statue's own points.
+        if let Some(cloud) = cloud.map(|c| &c.0)
+            && cloud.len() == p.positions.len()
+            && p.normals.len() == p.positions.len()
+            && same_skeleton(&pose.0, binding.0.fitted())
+        {
+            p.positions.copy_from_slice(&cloud.positions);
+            match &cloud.normals {
+                Some(n) if n.len() == cloud.len() => p.normals.copy_from_slice(n),
+                _ => p.normals.fill(Vec3::Y),
+            }
+            p.version += 1;
+            continue;
+        }
         match binding.0.deform(
             &pose.0,
             method,

@@ -75,6 +75,24 @@ pub struct Texts {
     pub touch_to_continue: String,
     pub load_failed: String,
     pub reset: String,
+    /// Part swapping ([`super::restore`]): a hint shown while ghost bones are on screen.
+    pub ghost_hint: String,
+    /// Heading of the donor carousel; `{part}` becomes the part's name.
+    pub part_choose: String,
+    /// A donor still being prepared (loaded, fitted, its part brought to size).
+    pub part_pending: String,
+    /// A donor ready to give its part.
+    pub part_ready: String,
+    /// A donor that cannot give this part.
+    pub part_unavailable: String,
+    /// The gentle message after a part could not be borrowed.
+    pub part_failed: String,
+    pub close: String,
+    pub undo: String,
+    /// The hypothesis strip; `{i}` and `{n}` become the restoration shown and their count.
+    pub restoration: String,
+    /// The hypothesis strip on the statue as found.
+    pub original: String,
 }
 
 /// The whole configuration.
@@ -167,6 +185,16 @@ impl Default for KioskConfig {
                 touch_to_continue: "Touch the screen to continue".into(),
                 load_failed: "This statue could not be shown.".into(),
                 reset: "Reset".into(),
+                ghost_hint: "Tap a ghost limb to borrow it from another statue".into(),
+                part_choose: "Borrow the {part} from:".into(),
+                part_pending: "Preparing…".into(),
+                part_ready: "Tap to borrow".into(),
+                part_unavailable: "Cannot lend this part".into(),
+                part_failed: "That part could not be borrowed. Please try another statue.".into(),
+                close: "Close".into(),
+                undo: "Undo".into(),
+                restoration: "Restoration {i} of {n}".into(),
+                original: "As found".into(),
             },
             problems: Vec::new(),
         }
@@ -571,6 +599,16 @@ impl KioskConfig {
                 touch_to_continue: s.string("touch_to_continue", &x.touch_to_continue),
                 load_failed: s.string("load_failed", &x.load_failed),
                 reset: s.string("reset", &x.reset),
+                ghost_hint: s.string("ghost_hint", &x.ghost_hint),
+                part_choose: s.string("part_choose", &x.part_choose),
+                part_pending: s.string("part_pending", &x.part_pending),
+                part_ready: s.string("part_ready", &x.part_ready),
+                part_unavailable: s.string("part_unavailable", &x.part_unavailable),
+                part_failed: s.string("part_failed", &x.part_failed),
+                close: s.string("close", &x.close),
+                undo: s.string("undo", &x.undo),
+                restoration: s.string("restoration", &x.restoration),
+                original: s.string("original", &x.original),
             };
             s.finish();
         }

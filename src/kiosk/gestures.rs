@@ -10,7 +10,8 @@
 //! | two fingers, or right-button drag | pan: the view follows the fingers' midpoint (exact at the focus depth) |
 //! | pinch | zoom: `distance ×= old span / new span`, clamped to [`GestureConfig::zoom_range`] × the home distance |
 //! | wheel | zoom: `distance ×= exp(−lines · wheel_zoom_per_line)` (pixels count 1/100 line) |
-//! | tap | selects the limb (template chain) of the bone under the finger, or nothing |
+//! | tap | selects the limb (template chain) of the bone under the finger, or nothing; a [`Tap`] message carries its pick ray (other plugins pick their own targets: the ghost bones of [`super::restore`]) |
+//! | tap or drag starting in a [`TouchZone`] | a [`ZoneGesture`] (tap, or swipe with its movement) for the zone's owner, nothing else |
 //! | double tap | back to the home view ([`OrbitCamera::reset`]) |
 //! | three-finger tap | [`ThreeFingerTap`] (the UI toggles the operator panel) |
 //! | drag starting on the end bone of the selected limb | inverse kinematics: the limb follows the finger ([`super::ik`]) |
@@ -49,6 +50,14 @@
 //! `d` plus that offset (the limb does not jump under the finger), the chain is solved by
 //! FABRIK and written into the statue's [`CurrentPose`] (any running [`PoseAnimation`] is
 //! stopped), which the skinning system re-skins.
+//!
+//! **Touch zones.** Screen rectangles claimed by overlays drawn without bevy_ui buttons (the
+//! restoration's donor carousel and hypothesis strip, [`super::restore`]) are listed in the
+//! [`TouchZones`] resource. A one-finger gesture that starts inside one is the zone's alone:
+//! no orbit, no selection, no double tap; on release it becomes a [`ZoneGesture`], a
+//! [`ZoneGestureKind::Tap`] under the tap thresholds, else a [`ZoneGestureKind::Swipe`] with
+//! the finger's whole movement. The same rectangles work headless, so tests drive overlays
+//! with injected touches.
 //!
 //! **Interaction.** Every touch or mouse press, every wheel step, and every frame with pointer
 //! movement writes an [`Interaction`] message (the idle timers restart). A press that lands on
@@ -132,12 +141,81 @@ pub struct GesturePlugin {
 #[derive(Message, Clone, Copy, Debug, Default)]
 pub struct ThreeFingerTap;
 
+/// A one-finger tap outside the UI and the touch zones, with its pick ray (written after the
+/// gesture plugin's own selection; see the module docs).
+#[derive(Message, Clone, Copy, Debug)]
+pub struct Tap {
+    pub window: Entity,
+    /// Logical pixels from the window's top-left corner.
+    pub position: Vec2,
+    /// The ray through `position` (see [`View::ray`]).
+    pub ray: PickRay,
+    /// How far a bone may be from the ray and still be picked, per unit of depth
+    /// ([`GestureConfig::pick_slack_px`] at this view).
+    pub slack_per_depth: f32,
+}
+
+/// A screen rectangle claimed by an overlay (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TouchZone {
+    /// The owner's name for it.
+    pub id: u32,
+    /// Logical pixels, `y` down.
+    pub rect: Rect,
+}
+
+/// The touch zones of this frame (owners rewrite their own each frame).
+#[derive(Resource, Clone, Debug, Default)]
+pub struct TouchZones {
+    pub zones: Vec<TouchZone>,
+}
+
+impl TouchZones {
+    /// The zone under `position` (the last listed wins, as the one drawn on top).
+    pub fn at(&self, position: Vec2) -> Option<u32> {
+        self.zones
+            .iter()
+            .rev()
+            .find(|z| z.rect.contains(position))
+            .map(|z| z.id)
+    }
+    /// Replaces the zones whose ids are in `ids` by `zones`.
+    pub fn set(&mut self, ids: &[u32], zones: impl IntoIterator<Item = TouchZone>) {
+        self.zones.retain(|z| !ids.contains(&z.id));
+        self.zones.extend(zones);
+    }
+}
+
+/// What a gesture in a touch zone was.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ZoneGestureKind {
+    Tap,
+    /// The finger's movement from press to release, logical pixels.
+    Swipe {
+        delta: Vec2,
+    },
+}
+
+/// A one-finger gesture that started in a [`TouchZone`].
+#[derive(Message, Clone, Copy, Debug, PartialEq)]
+pub struct ZoneGesture {
+    pub zone: u32,
+    /// Where the finger was pressed, logical pixels.
+    pub start: Vec2,
+    pub kind: ZoneGestureKind,
+}
+
+/// The gesture system (other plugins order their tap handling after it).
+#[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct GestureSystems;
+
 impl Plugin for GesturePlugin {
     fn build(&self, app: &mut App) {
         // `add_message` does nothing for messages already registered (InputPlugin,
         // WindowPlugin); headless tests run without the window plugin.
         app.insert_resource(self.config.clone())
             .init_resource::<GestureState>()
+            .init_resource::<TouchZones>()
             .init_resource::<Selection>()
             .init_resource::<OrbitCamera>()
             .add_message::<TouchInput>()
@@ -146,7 +224,12 @@ impl Plugin for GesturePlugin {
             .add_message::<MouseWheel>()
             .add_message::<Interaction>()
             .add_message::<ThreeFingerTap>()
-            .add_systems(Update, gestures.in_set(KioskSet::Input));
+            .add_message::<Tap>()
+            .add_message::<ZoneGesture>()
+            .add_systems(
+                Update,
+                gestures.in_set(KioskSet::Input).in_set(GestureSystems),
+            );
     }
 }
 
@@ -480,6 +563,8 @@ enum Mode {
         mid: Vec2,
     },
     Limb(LimbDrag),
+    /// In a touch zone (the zone's id).
+    Zone(u32),
 }
 
 #[derive(Clone, Debug)]
@@ -523,6 +608,10 @@ struct Frame<'a> {
     camera: Option<View>,
     sizes: &'a [(Entity, Vec2)],
     default_size: Vec2,
+    zones: &'a TouchZones,
+    /// One-finger taps of this frame (window, position).
+    taps: Vec<(Entity, Vec2)>,
+    zone_gestures: Vec<ZoneGesture>,
     pose: Option<Mut<'a, CurrentPose>>,
     fitted: bool,
     stop_animation: bool,
@@ -634,6 +723,8 @@ impl GestureState {
             None => {
                 let mode = if ui_pressed {
                     Mode::Inert
+                } else if let Some(zone) = f.zones.at(ev.position) {
+                    Mode::Zone(zone)
                 } else if ev.id == PointerId::MousePan {
                     Mode::Pan
                 } else if let Some(drag) = f.limb_drag_at(ev.window, ev.position) {
@@ -653,6 +744,7 @@ impl GestureState {
             Some(g) => {
                 g.max_pointers = g.max_pointers.max(self.pointers.len());
                 if !g.on_ui
+                    && !matches!(g.mode, Mode::Zone(_))
                     && touch_count(&self.pointers) >= 2
                     && let Some((span, mid)) = two_touches(&self.pointers)
                 {
@@ -689,7 +781,7 @@ impl GestureState {
             ev.position - old
         };
         match &mut g.mode {
-            Mode::Inert => {}
+            Mode::Inert | Mode::Zone(_) => {}
             Mode::Orbit => orbit_by(&mut f.orbit, delta, f.cfg),
             Mode::Pan => {
                 let px = f.view(window).pixel_size();
@@ -747,12 +839,34 @@ impl GestureState {
         }
         let g = self.gesture.take().expect("gesture");
         let quick = f.now - g.started_at <= f.cfg.tap_max_s as f64;
+        if let Mode::Zone(zone) = g.mode {
+            self.last_tap = None;
+            if g.canceled || g.on_ui || g.max_pointers != 1 {
+                return;
+            }
+            let kind = if g.moved {
+                ZoneGestureKind::Swipe {
+                    delta: position - p.start,
+                }
+            } else if quick {
+                ZoneGestureKind::Tap
+            } else {
+                return;
+            };
+            f.zone_gestures.push(ZoneGesture {
+                zone,
+                start: p.start,
+                kind,
+            });
+            return;
+        }
         if g.canceled || g.moved || g.on_ui || !quick {
             return;
         }
         match g.max_pointers {
             1 => {
                 f.select_at(p.window, position);
+                f.taps.push((p.window, position));
                 let double = self.last_tap.is_some_and(|(t, at)| {
                     g.started_at - t <= f.cfg.double_tap_s as f64
                         && (position - at).length() <= f.cfg.double_tap_px
@@ -828,12 +942,20 @@ impl Viewports<'_, '_> {
     }
 }
 
+#[derive(SystemParam)]
+struct Outputs<'w> {
+    interactions: MessageWriter<'w, Interaction>,
+    three_finger: MessageWriter<'w, ThreeFingerTap>,
+    taps: MessageWriter<'w, Tap>,
+    zone_gestures: MessageWriter<'w, ZoneGesture>,
+}
+
 #[allow(clippy::too_many_arguments)]
 fn gestures(
     mut inputs: Inputs,
     viewports: Viewports,
-    mut interactions: MessageWriter<Interaction>,
-    mut three_finger: MessageWriter<ThreeFingerTap>,
+    mut out: Outputs,
+    zones: Res<TouchZones>,
     mut state: ResMut<GestureState>,
     cfg: Res<GestureConfig>,
     time: Res<Time>,
@@ -935,6 +1057,9 @@ fn gestures(
         camera: viewports.camera_view(),
         sizes: &sizes,
         default_size: viewports.default_size(cfg.fallback_viewport),
+        zones: &zones,
+        taps: Vec::new(),
+        zone_gestures: Vec::new(),
         pose,
         fitted,
         stop_animation: false,
@@ -959,10 +1084,22 @@ fn gestures(
         frame.interactions += 1;
     }
     for _ in 0..frame.interactions {
-        interactions.write(Interaction);
+        out.interactions.write(Interaction);
     }
     for _ in 0..frame.three_finger_taps {
-        three_finger.write(ThreeFingerTap);
+        out.three_finger.write(ThreeFingerTap);
+    }
+    for &(window, position) in &frame.taps {
+        let view = frame.view(window);
+        out.taps.write(Tap {
+            window,
+            position,
+            ray: view.ray(position),
+            slack_per_depth: cfg.pick_slack_px * view.pixel_size(),
+        });
+    }
+    for g in frame.zone_gestures.drain(..) {
+        out.zone_gestures.write(g);
     }
     if frame.stop_animation
         && let Some(e) = statue

@@ -6,22 +6,44 @@
 //! ## Pipeline (one frame)
 //!
 //! ```text
-//! KioskSet::Input     gestures: touch/mouse → orbit camera, taps on bones, limb drags (IK)
+//! KioskSet::Input     gestures: touch/mouse → orbit camera, taps on bones, limb drags (IK);
+//!                     then taps on ghost bones, the donor carousel, the hypothesis strip
 //! KioskSet::Idle      attract mode, "still there?" countdown, reset
-//! KioskSet::Load      statue files read and prepared off the main thread; cache look-ups
-//! KioskSet::Register  incremental FAKIR within a per-frame budget (the skeleton settles in)
+//! KioskSet::Load      statue files read and prepared off the main thread; cache look-ups;
+//!                     part swapping's jobs polled (support, donors, parts brought to size)
+//! KioskSet::Register  incremental FAKIR within a per-frame budget (the skeleton settles in);
+//!                     a part flying in, and the restoration shown written to the statue
 //! KioskSet::Animate   pose animations (eased), limb drags → the statue's current pose
-//! KioskSet::Skin      the binding deforms the points into the statue's point buffer
-//! KioskSet::Render    point buffer → GPU splats, bones, camera
-//! KioskSet::Ui        pose strip, carousel, progress, error cards, operator panel
+//! KioskSet::Skin      the binding deforms the points into the statue's point buffer (at the
+//!                     fitted pose: the scan's own points); ghost bones follow the pose
+//! KioskSet::Render    point buffer → GPU splats, bones and ghost bones, camera
+//! KioskSet::Ui        pose strip, carousel, progress, error cards, operator panel; part
+//!                     swapping's touch zones and overlay
 //! ```
+//!
+//! | plugin | module |
+//! |---|---|
+//! | loading, cache, statue carousel | [`statue`] |
+//! | incremental FAKIR | [`fitting`] |
+//! | pose animation, skinning | [`animate`] |
+//! | touch and mouse gestures, picking, touch zones | [`gestures`] (limb drags: [`ik`]) |
+//! | attract mode, idle reset | [`attract`] |
+//! | visitor interface, operator panel | [`ui`] |
+//! | part swapping on broken statues (ghost bones, donor carousel, hypotheses, undo) | [`restore`] |
+//! | GPU splats, bones, camera (not headless) | [`render`] |
 //!
 //! ## Entities
 //! * a **statue** ([`Statue`], [`StatueState`], and once ready [`FittedSkeleton`],
 //!   [`StatueBinding`], [`CurrentPose`], [`SkinnedPoints`]);
 //! * its **bones**: child entities ([`BoneMarker`]) placed from the current pose, drawn as
 //!   translucent sphere-mesh bones while fitting, while posing, or when toggled;
-//! * its **points**: the rendered cloud (a child entity owned by the render plugin).
+//! * its **points**: the rendered cloud (a child entity owned by the render plugin);
+//! * on a broken statue, once analysed: [`restore::Restoration`] (missing parts, completed
+//!   skeleton, the restorations kept side by side) and [`restore::Provenance`] on the statue,
+//!   its **ghost bones** ([`restore::GhostBone`] children, one per bone of a missing part), and
+//!   while a part flies in a child entity with its own [`SkinnedPoints`]. Swapping a part
+//!   replaces the statue's [`StatueCloud`], [`FittedSkeleton`], [`StatueBinding`] and
+//!   [`CurrentPose`]; undo puts the originals back (the very same point cloud).
 //!
 //! Only one statue is shown at a time ([`ActiveStatue`]); the carousel switches statues by
 //! despawning the current one and spawning the next ([`StatueSelected`]).
@@ -33,6 +55,7 @@ pub mod fitting;
 pub mod gestures;
 pub mod ik;
 pub mod render;
+pub mod restore;
 pub mod statue;
 pub mod ui;
 
@@ -266,6 +289,13 @@ impl Plugin for KioskPlugin {
                 gestures::GesturePlugin::default(),
                 attract::AttractPlugin,
                 ui::UiPlugin {
+                    headless: self.headless,
+                },
+                restore::PartSwapPlugin {
+                    settings: restore::PartSwapSettings {
+                        thumbnails: !self.headless,
+                        ..Default::default()
+                    },
                     headless: self.headless,
                 },
             ));

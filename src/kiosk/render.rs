@@ -42,6 +42,11 @@
 //! Bones are visible while the statue is fitting or binding, while it moves
 //! ([`PoseAnimation`]), and whenever [`ShowBones`] is on.
 //!
+//! **Ghost bones** (the missing parts of a broken statue, [`GhostBone`] entities placed by
+//! [`super::restore`]) get the same cone and caps with their own material: pale blue, fainter,
+//! and hatched (the shader discards diagonal world-space stripes, [`GHOST_STRIPES`] of the
+//! bone's length), always visible while they exist.
+//!
 //! ## Camera
 //!
 //! One [`Camera3d`] ([`KioskCamera`], also the default UI camera) whose transform follows
@@ -51,6 +56,7 @@
 //! Multisampling is on, except on a software renderer (Mesa lavapipe: CI, headless
 //! screenshots), where it costs about a quarter of the frame for nothing the splats need.
 
+use super::restore::GhostBone;
 use super::{
     BoneMarker, CurrentPose, KioskSet, OrbitCamera, PoseAnimation, Settings, ShowBones,
     SkinnedPoints, StatueState,
@@ -98,6 +104,13 @@ pub const SPLAT_RADIUS_FACTOR: f32 = 1.5;
 pub const BONE_COLOR: [u8; 3] = [255, 140, 40];
 pub const BONE_ALPHA: f32 = 0.3;
 
+/// Ghost bone colour (sRGB) and base opacity.
+pub const GHOST_COLOR: [u8; 3] = [120, 200, 255];
+pub const GHOST_ALPHA: f32 = 0.22;
+/// Hatching of ghost bones: stripes per bone length, and the drawn fraction of each.
+pub const GHOST_STRIPES: f32 = 6.0;
+pub const GHOST_DUTY: f32 = 0.55;
+
 /// Key light direction in view space (towards the light: upper left, in front).
 pub const KEY_LIGHT_VIEW: Vec3 = Vec3::new(-0.4, 0.6, 0.7);
 
@@ -140,6 +153,8 @@ impl Plugin for SplatRenderPlugin {
                 update_points,
                 update_bones,
                 bone_visibility,
+                attach_ghost_meshes,
+                update_ghost_meshes,
             )
                 .chain()
                 .in_set(KioskSet::Render),
@@ -210,6 +225,8 @@ pub struct BoneParams {
     pub color: Vec4,
     /// View-space direction towards the key light, ambient in `w`.
     pub key_light: Vec4,
+    /// Hatching: stripe period in world units in `x` (0: solid), drawn fraction in `y`.
+    pub pattern: Vec4,
 }
 
 /// Translucent bones drawn over the statue (no depth test).
@@ -336,6 +353,7 @@ fn setup_view(
             params: BoneParams {
                 color: c.extend(BONE_ALPHA),
                 key_light: KEY_LIGHT_VIEW.normalize().extend(0.45),
+                pattern: Vec4::ZERO,
             },
         }),
         unit_sphere: meshes.add(sphere),
@@ -637,6 +655,25 @@ pub fn bone_transform(c1: Vec3, c2: Vec3) -> Transform {
     }
 }
 
+/// Rewrites a cone mesh of [`cone_mesh`] for a new shape (its vectors reused).
+fn reshape_cone(mesh: &mut Mesh, l: f32, r1: f32, r2: f32) {
+    let mut pos = Vec::new();
+    if let Some(VertexAttributeValues::Float32x3(p)) = mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
+    {
+        pos = std::mem::take(p);
+    }
+    let mut nrm = Vec::new();
+    if let Some(VertexAttributeValues::Float32x3(n)) = mesh.attribute_mut(Mesh::ATTRIBUTE_NORMAL) {
+        nrm = std::mem::take(n);
+    }
+    let v = 2 * (BONE_SEGMENTS + 1);
+    pos.resize(v, [0.0; 3]);
+    nrm.resize(v, [0.0; 3]);
+    cone_geometry(l, r1, r2, &mut pos, &mut nrm);
+    mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, pos);
+    mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, nrm);
+}
+
 fn cap_transform(y: f32, r: f32) -> Transform {
     let r = if r.is_finite() { r.max(0.0) } else { 0.0 };
     Transform::from_xyz(0.0, y, 0.0).with_scale(Vec3::splat(r))
@@ -726,24 +763,7 @@ fn update_bones(
                     }
                     parts.shape = shape;
                     if let Some(mut mesh) = meshes.get_mut(&parts.cone) {
-                        let mut pos = Vec::new();
-                        if let Some(VertexAttributeValues::Float32x3(p)) =
-                            mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
-                        {
-                            pos = std::mem::take(p);
-                        }
-                        let mut nrm = Vec::new();
-                        if let Some(VertexAttributeValues::Float32x3(n)) =
-                            mesh.attribute_mut(Mesh::ATTRIBUTE_NORMAL)
-                        {
-                            nrm = std::mem::take(n);
-                        }
-                        let v = 2 * (BONE_SEGMENTS + 1);
-                        pos.resize(v, [0.0; 3]);
-                        nrm.resize(v, [0.0; 3]);
-                        cone_geometry(l, b.r1, b.r2, &mut pos, &mut nrm);
-                        mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, pos);
-                        mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, nrm);
+                        reshape_cone(&mut mesh, l, b.r1, b.r2);
                     }
                 }
             }
@@ -777,6 +797,101 @@ fn bone_visibility(
             {
                 *v = want;
             }
+        }
+    }
+}
+
+/// A ghost bone's drawing: its cone mesh and its two caps.
+#[derive(Component, Debug, Clone)]
+pub struct GhostParts {
+    pub cone: Handle<Mesh>,
+    pub cap1: Entity,
+    pub cap2: Entity,
+    /// `(length, r1, r2)` the cone mesh was built for.
+    pub shape: [f32; 3],
+}
+
+/// The ghost material for a bone of length `l` (hatched with [`GHOST_STRIPES`] per length).
+pub fn ghost_material(l: f32) -> BoneMaterial {
+    let period = if l.is_finite() && l > 0.0 {
+        l / GHOST_STRIPES
+    } else {
+        0.0
+    };
+    BoneMaterial {
+        params: BoneParams {
+            color: linear(GHOST_COLOR).extend(GHOST_ALPHA),
+            key_light: KEY_LIGHT_VIEW.normalize().extend(0.6),
+            pattern: Vec4::new(period, GHOST_DUTY, 0.0, 0.0),
+        },
+    }
+}
+
+fn attach_ghost_meshes(
+    mut commands: Commands,
+    handles: Option<Res<RenderHandles>>,
+    ghosts: Query<(Entity, &GhostBone), Without<GhostParts>>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<BoneMaterial>>,
+) {
+    let Some(handles) = handles else { return };
+    for (e, g) in &ghosts {
+        let b = g.shape;
+        let l = (b.c2 - b.c1).length();
+        let cone = meshes.add(cone_mesh(l, b.r1, b.r2));
+        let material = MeshMaterial3d(materials.add(ghost_material(l)));
+        let cap1 = commands
+            .spawn((
+                BoneCap,
+                Mesh3d(handles.unit_sphere.clone()),
+                material.clone(),
+                cap_transform(0.0, b.r1),
+                ChildOf(e),
+            ))
+            .id();
+        let cap2 = commands
+            .spawn((
+                BoneCap,
+                Mesh3d(handles.unit_sphere.clone()),
+                material.clone(),
+                cap_transform(l, b.r2),
+                ChildOf(e),
+            ))
+            .id();
+        commands.entity(e).insert((
+            Mesh3d(cone.clone()),
+            material,
+            GhostParts {
+                cone,
+                cap1,
+                cap2,
+                shape: [l, b.r1, b.r2],
+            },
+        ));
+    }
+}
+
+fn update_ghost_meshes(
+    mut ghosts: Query<(&GhostBone, &mut GhostParts), Changed<GhostBone>>,
+    mut transforms: Query<&mut Transform>,
+    mut meshes: ResMut<Assets<Mesh>>,
+) {
+    for (g, mut parts) in &mut ghosts {
+        let b = g.shape;
+        let l = (b.c2 - b.c1).length();
+        let shape = [l, b.r1, b.r2];
+        if shape == parts.shape {
+            continue;
+        }
+        parts.shape = shape;
+        if let Some(mut mesh) = meshes.get_mut(&parts.cone) {
+            reshape_cone(&mut mesh, l, b.r1, b.r2);
+        }
+        if let Ok(mut t) = transforms.get_mut(parts.cap1) {
+            *t = cap_transform(0.0, b.r1);
+        }
+        if let Ok(mut t) = transforms.get_mut(parts.cap2) {
+            *t = cap_transform(l, b.r2);
         }
     }
 }

@@ -301,8 +301,11 @@ fn finish_loading(
                     },
                 ));
                 match loaded.cached {
-                    Some((fit, binding)) => {
+                    Some((_, binding)) => {
                         info!("statue ready from the cache");
+                        // The binding's own skeleton: bit-identical to the fit it was built
+                        // on (the JSON's is rounded), so the fitted pose shows the scan as is.
+                        let fit = binding.fitted().clone();
                         ec.insert((
                             CurrentPose(fit.clone()),
                             FittedSkeleton(fit),

@@ -309,10 +309,10 @@ fn measure_fps(time: Res<Time<Real>>, mut rate: ResMut<FrameRate>) {
 // ---------------------------------------------------------------------------------------------
 // Drawing.
 
-const FG: Color = Color::srgb(0.95, 0.94, 0.90);
-const FG_DIM: Color = Color::srgb(0.74, 0.73, 0.69);
-const CARD: Color = Color::srgba(0.07, 0.08, 0.11, 0.72);
-const BUTTON: Color = Color::srgba(0.20, 0.22, 0.28, 0.92);
+pub(crate) const FG: Color = Color::srgb(0.95, 0.94, 0.90);
+pub(crate) const FG_DIM: Color = Color::srgb(0.74, 0.73, 0.69);
+pub(crate) const CARD: Color = Color::srgba(0.07, 0.08, 0.11, 0.72);
+pub(crate) const BUTTON: Color = Color::srgba(0.20, 0.22, 0.28, 0.92);
 const BUTTON_HOVER: Color = Color::srgba(0.28, 0.31, 0.38, 0.95);
 const BUTTON_PRESSED: Color = Color::srgba(0.42, 0.47, 0.56, 1.0);
 const BUTTON_ON: Color = Color::srgba(0.18, 0.44, 0.52, 0.95);
@@ -333,13 +333,29 @@ fn button_node(min_width: f32, min_height: f32) -> Node {
 
 /// How texts are drawn: the UI font, and whether it is Bevy's built-in ASCII-only font
 /// (then texts go through [`ascii_fallback`]).
-struct Look {
+pub(crate) struct Look {
     font: FontSource,
     ascii: bool,
 }
 
 impl Look {
-    fn text(&self, s: impl Into<String>, size: f32, color: Color) -> (Text, TextFont, TextColor) {
+    /// The look of the interface font (Bevy's built-in one, ASCII only, without it).
+    pub(crate) fn new(font: &UiFont) -> Look {
+        Look {
+            font: font
+                .handle
+                .clone()
+                .map_or_else(FontSource::default, FontSource::Handle),
+            ascii: font.handle.is_none(),
+        }
+    }
+
+    pub(crate) fn text(
+        &self,
+        s: impl Into<String>,
+        size: f32,
+        color: Color,
+    ) -> (Text, TextFont, TextColor) {
         let s: String = s.into();
         (
             Text::new(if self.ascii { ascii_fallback(&s) } else { s }),
@@ -382,13 +398,7 @@ fn card(node: Node) -> (Node, BackgroundColor) {
 }
 
 fn spawn_ui(mut commands: Commands, settings: Res<Settings>, font: Res<UiFont>) {
-    let look = Look {
-        font: font
-            .handle
-            .clone()
-            .map_or_else(FontSource::default, FontSource::Handle),
-        ascii: font.handle.is_none(),
-    };
+    let look = Look::new(&font);
     let cfg = &settings.0;
     let t = &cfg.texts;
     let first = cfg.statues.first();
@@ -617,7 +627,7 @@ fn spawn_ui(mut commands: Commands, settings: Res<Settings>, font: Res<UiFont>) 
 }
 
 /// Loads the first font of [`font_candidates`] that reads and parses into the font assets.
-fn load_font(
+pub(crate) fn load_font(
     settings: Res<Settings>,
     fonts: Option<ResMut<Assets<Font>>>,
     mut ui_font: ResMut<UiFont>,
@@ -641,7 +651,7 @@ fn load_font(
     );
 }
 
-fn set_text(ascii: bool, text: &mut Mut<Text>, s: &str) {
+pub(crate) fn set_text(ascii: bool, text: &mut Mut<Text>, s: &str) {
     let s = if ascii {
         ascii_fallback(s)
     } else {
@@ -652,7 +662,7 @@ fn set_text(ascii: bool, text: &mut Mut<Text>, s: &str) {
     }
 }
 
-fn set_visible(v: &mut Mut<Visibility>, visible: bool) {
+pub(crate) fn set_visible(v: &mut Mut<Visibility>, visible: bool) {
     let want = if visible {
         Visibility::Inherited
     } else {

@@ -14,6 +14,7 @@
 //! | a donor's part re-proportioned and re-posed onto the target | [`transfer`] |
 //! | the overlap merged to a single layer (eq. 5.1) | [`merge`] |
 //! | the whole restoration, with provenance | [`restore`] (this module) |
+//! | one part at a time (the kiosk's part swapping): donor check, assembly with provenance | [`check_donor`], [`Assembly`] |
 
 pub mod merge;
 pub mod support;
@@ -144,14 +145,7 @@ pub fn restore(
     let redo: Vec<bool> = sup.iter().map(|s| s.missing).collect();
     let completed = complete(target_fit, &redo);
     // Start from the target's points.
-    let mut positions = target.positions.clone();
-    let mut normals = target
-        .normals
-        .clone()
-        .unwrap_or_else(|| vec![Vec3::Y; target.len()]);
-    let mut colors = target.colors.clone();
-    let mut source = vec![FROM_TARGET; target.len()];
-    let mut bone = nearest_bones(&positions, &completed);
+    let mut assembly = Assembly::from_target(target, &completed);
     let mut reports = Vec::new();
     let topts = TransferOptions {
         pose: opts.pose,
@@ -168,18 +162,8 @@ pub fn restore(
         let mut last_err = None;
         let mut done = false;
         for (di, d) in donors.iter().enumerate() {
-            let lacking: Vec<&str> = part
-                .bones
-                .iter()
-                .filter(|&&k| donor_support[di].get(k).is_some_and(|s| s.missing))
-                .map(|&k| t.bones[k].name.as_str())
-                .collect();
-            if !lacking.is_empty() {
-                last_err = Some(Error::input(format!(
-                    "donor {} lacks {} too",
-                    d.name,
-                    lacking.join(", ")
-                )));
+            if let Err(e) = check_donor(t, &d.name, &donor_support[di], part) {
+                last_err = Some(e);
                 continue;
             }
             if bindings[di].is_none() {
@@ -188,24 +172,9 @@ pub fn restore(
             let binding = bindings[di].as_ref().expect("bound just above");
             match transfer(&completed, d.cloud, binding, part, &topts) {
                 Ok(tr) => {
-                    let n = tr.cloud.len();
-                    positions.extend_from_slice(&tr.cloud.positions);
-                    normals.extend(tr.cloud.normals.clone().unwrap_or_default());
-                    match (&mut colors, &tr.cloud.colors) {
-                        (Some(c), Some(tc)) => c.extend_from_slice(tc),
-                        (Some(c), None) => c.extend(std::iter::repeat_n([200, 200, 200], n)),
-                        _ => {}
-                    }
-                    source.extend(std::iter::repeat_n(di as u32 + 1, n));
-                    bone.extend_from_slice(&tr.bones);
-                    let (_, stats) = merge(
-                        &completed,
-                        part.bones[0],
-                        &part.bones,
-                        topts.margin,
-                        &mut positions,
-                        &opts.merge,
-                    );
+                    let source = di as u32 + 1;
+                    let stats =
+                        assembly.add(&completed, part, &tr, source, topts.margin, &opts.merge);
                     reports.push(PartReport {
                         bones: part
                             .bones
@@ -214,8 +183,8 @@ pub fn restore(
                             .collect(),
                         attach: part.attach.map(|a| t.bones[a].name.clone()),
                         donor: d.name.clone(),
-                        source: di as u32 + 1,
-                        points: n,
+                        source,
+                        points: tr.cloud.len(),
                         merge: stats,
                     });
                     done = true;
@@ -238,11 +207,7 @@ pub fn restore(
             )));
         }
     }
-    if colors.as_ref().is_some_and(|c| c.len() != positions.len()) {
-        colors = None;
-    }
-    let mut cloud = PointCloud::with_normals(positions, normals);
-    cloud.colors = colors;
+    let (cloud, source, bone) = assembly.finish();
     Ok(Restored {
         report: Report {
             support: sup,
@@ -260,8 +225,145 @@ pub fn restore(
     })
 }
 
+/// Fails when the donor (support `donor_support`) lacks a bone of `part` too: a donor
+/// missing a bone of the part cannot give it.
+pub fn check_donor(
+    t: &crate::anatomy::Template,
+    donor: &str,
+    donor_support: &[BoneSupport],
+    part: &Part,
+) -> Result<()> {
+    let lacking: Vec<&str> = part
+        .bones
+        .iter()
+        .filter(|&&k| donor_support.get(k).is_some_and(|s| s.missing))
+        .map(|&k| t.bones[k].name.as_str())
+        .collect();
+    if lacking.is_empty() {
+        Ok(())
+    } else {
+        Err(Error::input(format!(
+            "donor {donor} lacks {} too",
+            lacking.join(", ")
+        )))
+    }
+}
+
+/// A restoration being assembled: the target's points first, then each transferred part's,
+/// with per-point provenance ([`Restored::source`], [`Restored::bone`]). [`restore`] builds
+/// one; the kiosk adds parts one at a time (each step a new hypothesis).
+#[derive(Clone, Debug)]
+pub struct Assembly {
+    pub positions: Vec<Vec3>,
+    pub normals: Vec<Vec3>,
+    pub colors: Option<Vec<[u8; 3]>>,
+    /// Per point: [`FROM_TARGET`] or the source given to [`Assembly::add`].
+    pub source: Vec<u32>,
+    /// Per point: the bone it came with.
+    pub bone: Vec<u32>,
+}
+
+impl Assembly {
+    /// The target's points, each labelled [`FROM_TARGET`] and with its nearest bone of
+    /// `skeleton` (the completed target skeleton).
+    pub fn from_target(target: &PointCloud, skeleton: &Skeleton) -> Assembly {
+        let positions = target.positions.clone();
+        let bone = nearest_bones(&positions, skeleton);
+        Assembly {
+            normals: target
+                .normals
+                .clone()
+                .unwrap_or_else(|| vec![Vec3::Y; target.len()]),
+            colors: target.colors.clone(),
+            source: vec![FROM_TARGET; target.len()],
+            bone,
+            positions,
+        }
+    }
+
+    /// An assembly resumed from a restored cloud and its provenance (one entry per point).
+    pub fn resume(cloud: &PointCloud, source: Vec<u32>, bone: Vec<u32>) -> Result<Assembly> {
+        if source.len() != cloud.len() || bone.len() != cloud.len() {
+            return Err(Error::input(format!(
+                "restore: {} points with {} sources and {} bones",
+                cloud.len(),
+                source.len(),
+                bone.len()
+            )));
+        }
+        Ok(Assembly {
+            positions: cloud.positions.clone(),
+            normals: cloud
+                .normals
+                .clone()
+                .unwrap_or_else(|| vec![Vec3::Y; cloud.len()]),
+            colors: cloud.colors.clone(),
+            source,
+            bone,
+        })
+    }
+
+    /// Number of points so far.
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// True when there is no point.
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+
+    /// Appends a transferred part (its points labelled `source`, with their donor bones) and
+    /// merges the overlap around the part's joint on `skeleton` (eq. 5.1, [`merge`]).
+    pub fn add(
+        &mut self,
+        skeleton: &Skeleton,
+        part: &Part,
+        tr: &transfer::Transferred,
+        source: u32,
+        margin: f32,
+        opts: &MergeOptions,
+    ) -> MergeStats {
+        let n = tr.cloud.len();
+        self.positions.extend_from_slice(&tr.cloud.positions);
+        self.normals
+            .extend(tr.cloud.normals.clone().unwrap_or_else(|| vec![Vec3::Y; n]));
+        match (&mut self.colors, &tr.cloud.colors) {
+            (Some(c), Some(tc)) => c.extend_from_slice(tc),
+            (Some(c), None) => c.extend(std::iter::repeat_n([200, 200, 200], n)),
+            _ => {}
+        }
+        self.source.extend(std::iter::repeat_n(source, n));
+        self.bone.extend_from_slice(&tr.bones);
+        let (_, stats) = merge(
+            skeleton,
+            part.bones[0],
+            &part.bones,
+            margin,
+            &mut self.positions,
+            opts,
+        );
+        stats
+    }
+
+    /// The restored cloud and its provenance (`source`, `bone`); colours are dropped when
+    /// some points lack them.
+    pub fn finish(self) -> (PointCloud, Vec<u32>, Vec<u32>) {
+        let mut colors = self.colors;
+        if colors
+            .as_ref()
+            .is_some_and(|c| c.len() != self.positions.len())
+        {
+            colors = None;
+        }
+        let mut cloud = PointCloud::with_normals(self.positions, self.normals);
+        cloud.colors = colors;
+        (cloud, self.source, self.bone)
+    }
+}
+
 /// The nearest bone (by signed distance) of every point.
-fn nearest_bones(positions: &[Vec3], skel: &Skeleton) -> Vec<u32> {
+pub fn nearest_bones(positions: &[Vec3], skel: &Skeleton) -> Vec<u32> {
     use rayon::prelude::*;
     let prepared: Vec<_> = skel
         .pose()

@@ -95,6 +95,11 @@ pub struct Transferred {
     pub bones: Vec<u32>,
     /// True for the margin points (on the attach bone, for the overlap).
     pub margin: Vec<bool>,
+    /// Donor point index of each point (where it came from, e.g. to animate it in).
+    pub indices: Vec<u32>,
+    /// The skeleton the donor was deformed to: the target's, with the donor's relative
+    /// rotations for the part's bones under [`PoseSource::Donor`] (the part's points lie on it).
+    pub skeleton: Skeleton,
 }
 
 /// Transfers `part` from the donor (`donor_cloud`, bound to its fit as `binding` — bind a
@@ -180,5 +185,7 @@ pub fn transfer(
         cloud,
         bones: keep.iter().map(|&i| labels[i] as u32).collect(),
         margin,
+        indices: keep.iter().map(|&i| i as u32).collect(),
+        skeleton: goal,
     })
 }

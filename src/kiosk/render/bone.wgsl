@@ -12,12 +12,20 @@ struct BoneParams {
     color: vec4<f32>,
     // View-space direction towards the key light (xyz), ambient (w).
     key_light: vec4<f32>,
+    // Hatching (ghost bones): stripe period in world units (x, 0: solid), drawn fraction (y).
+    pattern: vec4<f32>,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(0) var<uniform> params: BoneParams;
 
 @fragment
 fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
+    if params.pattern.x > 0.0 {
+        let along = dot(in.world_position.xyz, vec3<f32>(0.57735, 0.57735, 0.57735));
+        if fract(along / params.pattern.x) > params.pattern.y {
+            discard;
+        }
+    }
     let n = normalize(in.world_normal);
     var to_eye = view.world_position - in.world_position.xyz;
     if view.clip_from_view[3][3] == 1.0 {
