@@ -88,6 +88,32 @@ fn info_synth_normals_and_register_write_what_they_promise() {
             .unwrap();
     assert_eq!(labelled.len(), 3000);
     assert!(bone.iter().all(|b| *b >= 0.0 && *b < 22.0));
+
+    // `--start`: registration from the ground truth stays on it.
+    let refit = dir.join("refit.json");
+    run(args(&[
+        "register",
+        synth.to_str().unwrap(),
+        "--start",
+        truth.to_str().unwrap(),
+        "--out",
+        refit.to_str().unwrap(),
+    ]))
+    .unwrap();
+    let t = pygmalion::anatomy::Skeleton::load_json(&truth, None).unwrap();
+    let f = pygmalion::anatomy::Skeleton::load_json(&refit, None).unwrap();
+    let err = f.mean_joint_distance(&t);
+    assert!(err < 0.005, "refit from the truth drifted by {err} (height 1)");
+    let missing = dir.join("missing.json");
+    let e = run(args(&[
+        "register",
+        synth.to_str().unwrap(),
+        "--start",
+        missing.to_str().unwrap(),
+    ]))
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("missing.json"), "{e}");
 }
 
 #[test]

@@ -134,6 +134,10 @@ enum Command {
         /// The statue's up axis: `x`, `y`, `z`, `-x`, … or `x,y,z`.
         #[arg(long)]
         up: Option<String>,
+        /// Start from this skeleton (JSON from `register --out`, e.g. an earlier fit or a
+        /// restorer's correction) instead of the automatic placement.
+        #[arg(long, conflicts_with_all = ["anchor", "up"])]
+        start: Option<PathBuf>,
         /// Write the fitted skeleton here (JSON).
         #[arg(long)]
         out: Option<PathBuf>,
@@ -358,6 +362,7 @@ where
             template,
             anchor,
             up,
+            start,
             out,
             labels,
             drop_non_finite,
@@ -366,6 +371,7 @@ where
             &template,
             anchor.as_deref(),
             up.as_deref(),
+            start.as_deref(),
             out.as_deref(),
             labels.as_deref(),
             drop_non_finite,

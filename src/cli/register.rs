@@ -88,12 +88,14 @@ impl FitReport {
     }
 }
 
-/// Runs the command.
+/// Runs the command (its arguments as the CLI parsed them).
+#[allow(clippy::too_many_arguments)]
 pub fn run(
     input: &Path,
     template: &str,
     anchor: Option<&str>,
     up: Option<&str>,
+    start: Option<&Path>,
     out: Option<&Path>,
     labels: Option<&Path>,
     drop_non_finite: bool,
@@ -101,10 +103,18 @@ pub fn run(
     let template = Arc::new(Template::resolve(template)?);
     let cloud = super::read(input, drop_non_finite)?;
     let up = up.map(parse_axis).transpose()?;
-    let init = match (anchor.map(|a| parse_vec3(a, "anchor")).transpose()?, up) {
-        (Some(anchor), up) => Init::Anchor { anchor, up },
-        (None, Some(up)) => Init::Up(up),
-        (None, None) => Init::Auto,
+    let init = match (
+        anchor.map(|a| parse_vec3(a, "anchor")).transpose()?,
+        up,
+        start,
+    ) {
+        (_, _, Some(path)) => Init::Given(crate::anatomy::Skeleton::load_json(
+            path,
+            Some(template.clone()),
+        )?),
+        (Some(anchor), up, None) => Init::Anchor { anchor, up },
+        (None, Some(up), None) => Init::Up(up),
+        (None, None, None) => Init::Auto,
     };
     fit(input, Arc::new(cloud), template, init, out, labels)
 }

@@ -30,7 +30,7 @@
 
 use crate::anatomy::{Skeleton, Template};
 use crate::geometry::pca::{Pca, pca};
-use crate::math::{Mat3, Quat, Vec3};
+use crate::math::{Quat, Vec3};
 use crate::rng::Rng;
 use std::sync::Arc;
 
@@ -105,7 +105,7 @@ pub fn candidates(t: &Arc<Template>, points: &[Vec3], init: &Init) -> Vec<Candid
         _ => {
             scale = extent_along(points, cp.centroid, cp.axes[0])
                 / extent_along(&samples, tp.centroid, tp.axes[0]).max(1e-9);
-            rotations = frame_alignments(&tp, &cp);
+            rotations = axis_alignments(&tp, &cp);
         }
     }
     rotations
@@ -123,63 +123,75 @@ pub fn candidates(t: &Arc<Template>, points: &[Vec3], init: &Init) -> Vec<Candid
         .collect()
 }
 
-/// Proper rotations sending the template's principal axes onto the cloud's, for each sign
-/// choice and both orders of the minor axes.
-fn frame_alignments(tp: &Pca, cp: &Pca) -> Vec<Quat> {
-    let t = Mat3::from_cols(tp.axes[0], tp.axes[1], tp.axes[2]);
+/// Rotations sending the template's major principal axis onto the cloud's, either way, each
+/// followed by 8 turns (45° apart) about the cloud's major axis: 16 candidates. (Aligning the
+/// minor axes too, as a first version did, gives only 90° steps; a figure whose arms or legs
+/// spread diagonally has minor axes that say little about its facing.)
+fn axis_alignments(tp: &Pca, cp: &Pca) -> Vec<Quat> {
     let mut out = Vec::new();
-    for swap in [false, true] {
-        // The second axis of the frame; the third follows from the cross product.
-        let c1 = if swap { cp.axes[2] } else { cp.axes[1] };
-        for s0 in [1.0f32, -1.0] {
-            for s1 in [1.0f32, -1.0] {
-                let a0 = s0 * cp.axes[0];
-                let a1 = s1 * c1;
-                let a2 = a0.cross(a1);
-                let c = Mat3::from_cols(a0, a1, a2);
-                let r = c * t.transpose();
-                out.push(Quat::from_mat3(&r).normalize());
-            }
+    for s0 in [1.0f32, -1.0] {
+        let target = s0 * cp.axes[0];
+        let base = crate::geometry::frames::rotation_arc(tp.axes[0], target);
+        // Start the turns from the alignment of the second axes, so the first candidate of
+        // each sign is the plain principal-frame alignment.
+        let second = base * tp.axes[1];
+        let want = cp.axes[1] - cp.axes[1].dot(target) * target;
+        let start = if want.length() > 1e-6 && second.length() > 1e-6 {
+            let (a, b) = (second.normalize(), want.normalize());
+            a.cross(b).dot(target).atan2(a.dot(b))
+        } else {
+            0.0
+        };
+        for k in 0..8 {
+            let turn =
+                Quat::from_axis_angle(target, start + k as f32 * std::f32::consts::TAU / 8.0);
+            out.push((turn * base).normalize());
         }
     }
     out
 }
 
+/// How far the direction `dir` of bone `b`, expressed in the template's rest frame (its
+/// parent at rest), lies outside the bone's joint range (radians): the angle to the nearest
+/// direction of the hinge arc `bend` about `bend_axis` (or to the rest direction), minus the
+/// `swing` cone. Zero for bones without a range.
+pub fn range_excess(t: &Template, rest_frames: &[Quat], b: usize, dir: Vec3) -> f32 {
+    let def = &t.bones[b];
+    if def.kind != crate::anatomy::BoneKind::Free || (def.bend.is_none() && def.swing_deg <= 0.0) {
+        return 0.0;
+    }
+    let axis = rest_frames[b] * Vec3::X;
+    let angle_to = |d: Vec3| -> f32 { d.dot(dir).clamp(-1.0, 1.0).acos() };
+    let best = match def.bend {
+        Some((bend_axis, lo, hi)) => (0..=12)
+            .map(|k| {
+                angle_to(
+                    Quat::from_axis_angle(
+                        bend_axis,
+                        (lo + (hi - lo) * k as f32 / 12.0).to_radians(),
+                    ) * axis,
+                )
+            })
+            .fold(f32::INFINITY, f32::min),
+        None => angle_to(axis),
+    };
+    (best - def.swing_deg.to_radians()).max(0.0)
+}
+
 /// How far a skeleton's pose lies outside the template's joint ranges (radians, summed over
-/// bones): for every free bone with a range — a hinge `bend` about `bend_axis` and a `swing`
-/// cone — the angle by which the bone's direction relative to its parent (compared at the rest
-/// pose) leaves the directions the range allows. Zero for any pose the synthetic generator can
-/// draw; a figure fitted facing backwards pays for its feet and knees.
+/// bones, [`range_excess`] of each bone's direction relative to its parent, compared at the
+/// rest pose). Zero for any pose the synthetic generator can draw; a figure fitted facing
+/// backwards pays for its feet and knees.
 pub fn implausibility(s: &Skeleton) -> f64 {
     let t = &s.template;
     let rest = Skeleton::rest(s.template.clone());
     let frames = crate::anatomy::skeleton::rest_frames(t);
     let mut total = 0.0f64;
-    for (i, def) in t.bones.iter().enumerate() {
-        if def.kind != crate::anatomy::BoneKind::Free
-            || (def.bend.is_none() && def.swing_deg <= 0.0)
-        {
-            continue;
-        }
+    for i in 0..t.bones.len() {
         let local = rest.bones[i].rotation.inverse() * s.bones[i].rotation;
         let world_at_rest = frames[i] * local * frames[i].inverse();
-        let axis = frames[i] * Vec3::X;
-        let dir = world_at_rest * axis;
-        let angle_to = |d: Vec3| -> f32 { d.dot(dir).clamp(-1.0, 1.0).acos() };
-        let best = match def.bend {
-            Some((bend_axis, lo, hi)) => (0..=12)
-                .map(|k| {
-                    angle_to(
-                        Quat::from_axis_angle(
-                            bend_axis,
-                            (lo + (hi - lo) * k as f32 / 12.0).to_radians(),
-                        ) * axis,
-                    )
-                })
-                .fold(f32::INFINITY, f32::min),
-            None => angle_to(axis),
-        };
-        total += (best - def.swing_deg.to_radians()).max(0.0) as f64;
+        let dir = world_at_rest * (frames[i] * Vec3::X);
+        total += range_excess(t, &frames, i, dir) as f64;
     }
     total
 }

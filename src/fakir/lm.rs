@@ -231,6 +231,68 @@ pub struct EnergyTerms<'a> {
     pub bones: &'a [usize],
     /// Optional occupancy term (model → data).
     pub occupancy: Option<OccupancyTerm<'a>>,
+    /// Optional joint-range prior.
+    pub prior: Option<RangePrior>,
+}
+
+/// The joint-range prior (our addition): a bone whose direction relative to its parent leaves
+/// the template's joint range (`bend`, `swing`) by more than `margin` pays
+/// `weight · (excess − margin)` as one residual. The thesis has no such term; without it a
+/// short bone whose points are few (a hand, the neck) can fold inside its neighbour, where no
+/// point and no occupancy sample holds it, and stay there. **Choice:** margin 45° (statue
+/// poses beyond the generator's ranges cost nothing), weight `√(n_b) · r̄_b` (`n_b` the points
+/// the bone would carry at the mean density, `r̄_b` its mean radius), so one radian beyond the
+/// margin costs like every point of the bone lying one radius off.
+///
+/// It also holds the **proportion prior** (the "loose proportion constraints between
+/// consecutive bones" of §2.4.1, made soft): a bone whose length ratio to its chain
+/// predecessor leaves the template's ratio by more than a factor [`RATIO_MARGIN`] either way
+/// pays `weight · (|ln(ratio / template ratio)| − ln RATIO_MARGIN)`, with the same weight as
+/// the range term. Within the margin (statues are stylised; the generator draws ±30% per
+/// bone) it costs nothing; beyond it, it stops a joint from sliding along a straight limb
+/// (a wrist sliding to the elbow, a skull base sliding down the neck), where the surface
+/// alone cannot tell where the joint is.
+#[derive(Clone, Debug)]
+pub struct RangePrior {
+    /// Bones and their weights.
+    pub bones: Vec<(usize, f64)>,
+    /// Free angle beyond the range (radians).
+    pub margin: f32,
+    /// Length-ratio terms: (bone, chain predecessor, template ratio, weight).
+    pub ratios: Vec<(usize, usize, f32, f64)>,
+}
+
+/// Factor by which a length ratio may leave the template's before the proportion prior acts.
+pub const RATIO_MARGIN: f32 = 1.8;
+
+/// Margin of the joint-range prior (radians).
+pub const PRIOR_MARGIN: f32 = std::f32::consts::FRAC_PI_4;
+
+impl RangePrior {
+    /// The residuals of the prior for `w`, in the order of `bones`.
+    pub fn residuals(&self, w: &WorldSkeleton) -> Vec<f64> {
+        self.bones
+            .iter()
+            .map(|&(b, wgt)| {
+                let excess = super::init::range_excess(
+                    &w.template,
+                    &w.rest_frames,
+                    b,
+                    w.direction_at_rest(b),
+                );
+                wgt * (excess - self.margin).max(0.0) as f64
+            })
+            .chain(self.ratios.iter().map(|&(b, prev, ratio, wgt)| {
+                let r = w.lengths[b] / (ratio * w.lengths[prev]).max(1e-30);
+                wgt * (r.max(1e-30).ln().abs() - RATIO_MARGIN.ln()).max(0.0) as f64
+            }))
+            .collect()
+    }
+
+    /// Energy of the prior.
+    pub fn energy(&self, w: &WorldSkeleton) -> f64 {
+        self.residuals(w).iter().map(|r| r * r).sum()
+    }
 }
 
 /// The occupancy term (model → data) of chain extremities: samples on the visible surface of
@@ -392,7 +454,9 @@ impl EnergyTerms<'_> {
 
     /// Data energy plus the occupancy term, for a world skeleton.
     pub fn total_energy(&self, w: &WorldSkeleton) -> f64 {
-        self.energy(&w.bones()) + self.occupancy.as_ref().map_or(0.0, |c| c.energy(w))
+        self.energy(&w.bones())
+            + self.occupancy.as_ref().map_or(0.0, |c| c.energy(w))
+            + self.prior.as_ref().map_or(0.0, |p| p.energy(w))
     }
 }
 
@@ -431,6 +495,7 @@ pub fn normal_equations(
     // Geometry Jacobian by central differences of the forward kinematics.
     let mut geo = vec![[GeoDeriv::default(); MAX_PARAMS]; n_bones];
     let mut occ_deriv: Vec<Vec<Vec3>> = vec![Vec::new(); MAX_PARAMS];
+    let mut prior_deriv: Vec<Vec<f64>> = vec![Vec::new(); MAX_PARAMS];
     for (j, p) in params.iter().enumerate() {
         let h = fd_step(p, size);
         let mut plus = w.clone();
@@ -444,6 +509,14 @@ pub fn normal_equations(
                 .iter()
                 .zip(&sm)
                 .map(|(a, b)| (*a - *b) / (2.0 * h))
+                .collect();
+        }
+        if let Some(prior) = &terms.prior {
+            let (rp, rm) = (prior.residuals(&plus), prior.residuals(&minus));
+            prior_deriv[j] = rp
+                .iter()
+                .zip(&rm)
+                .map(|(a, b)| (a - b) / (2.0 * h as f64))
                 .collect();
         }
         for &b in terms.bones {
@@ -509,6 +582,21 @@ pub fn normal_equations(
             let mut row = [0.0f64; MAX_PARAMS];
             for j in 0..k {
                 row[j] = wgt * e.dot(occ_deriv[j][q]) as f64;
+            }
+            energy += r * r;
+            for j in 0..k {
+                jtr[j] += row[j] * r;
+                for m in j..k {
+                    jtj[j * MAX_PARAMS + m] += row[j] * row[m];
+                }
+            }
+        }
+    }
+    if let Some(prior) = &terms.prior {
+        for (q, r) in prior.residuals(w).iter().enumerate() {
+            let mut row = [0.0f64; MAX_PARAMS];
+            for j in 0..k {
+                row[j] = prior_deriv[j][q];
             }
             energy += r * r;
             for j in 0..k {

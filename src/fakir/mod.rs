@@ -6,7 +6,8 @@
 //! | point-to-bone assignment `P_k` with the cone preference | [`assign`] |
 //! | world-space skeleton edits and shared radii | [`world`] |
 //! | Levenberg–Marquardt on parameter groups (eq. 2.6–2.15) | [`lm`] |
-//! | one-bone, two-bone, root-block fits; bootstrap; work units | [`solver`] |
+//! | one-bone, two-bone, root-block fits; bootstrap; limb seeding; work units | [`solver`] |
+//! | joint-range and proportion priors | [`lm`] ([`lm::RangePrior`]) |
 //! | Algorithm 1 on a chain; whole-skeleton order with backtracking | [`schedule`] |
 //! | automatic initial placement (PCA, candidate orientations) | [`init`] |
 //! | levels, the resumable `step(budget)` registration | [`registration`] |

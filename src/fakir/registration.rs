@@ -6,7 +6,7 @@
 //!    registration on a small subsample; the best is kept.
 //! 2. **Level 0**: the whole-skeleton schedule ([`super::schedule`]) on a random subsample
 //!    (`subsample` points, default 8000) until convergence, from each of the `finalists`
-//!    (default 3) best candidates; the lowest two-sided score (mean distance + occupancy,
+//!    (default 5) best candidates; the lowest two-sided score (mean distance + occupancy,
 //!    [`super::solver::Solver::occupancy`]) is kept, near-ties going to the most plausible
 //!    pose ([`super::init::implausibility`]).
 //! 3. **Level 1** (clouds larger than the subsample): the assignment is redone on all points
@@ -67,7 +67,7 @@ impl Default for RegistrationOptions {
             subsample: 8000,
             init_subsample: 1500,
             final_iterations: 1,
-            finalists: 3,
+            finalists: 5,
             seed: 7,
             solver: SolverSettings::default(),
             schedule: ScheduleSettings::default(),

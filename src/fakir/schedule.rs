@@ -13,6 +13,15 @@
 //! 3. **Convergence (our choice):** passes stop when the chain's energy decreases by less
 //!    than `chain_tolerance` (relative, default 1e-3) over a pass, or after `max_passes`.
 //!
+//! ## Seeding (our addition)
+//! A fresh registration first **seeds** every limb chain (every chain after the first, the
+//! trunk): each bone is aimed, from the anchor out, at the direction and length that best
+//! explain the points nothing trusted explains yet, with a model → data cost
+//! ([`Solver::seed_chains`]); a chain and its mirror are seeded together. Two rounds: in the
+//! first, a chain trusts the bones of the chains before it; in the second, every other
+//! chain. FAKIR's least squares only converge from a nearby start — the papers place the
+//! template by hand — and a statue's arms are rarely where the rest pose has them.
+//!
 //! ## The whole skeleton
 //! Chains are registered in the template's order (spine, legs, arms for the human). The root
 //! block (pelvis: position, orientation and common scale) is refitted after each spine pass
@@ -133,6 +142,37 @@ pub fn register_chain(
     Ok(passes + 1)
 }
 
+/// Bones registered before chain `ci` in the template's order: every bone except those of
+/// the chains of `group`, of chain `ci` and of later chains (and their followers).
+fn trusted_before(s: &Solver, ci: usize, group: &[usize]) -> Vec<bool> {
+    let t = &s.world.template;
+    let mut trusted = vec![true; t.bones.len()];
+    for (c, chain) in t.chains.iter().enumerate() {
+        if c >= ci || group.contains(&c) {
+            for &b in &chain.bones {
+                for x in s.with_followers(b) {
+                    trusted[x] = false;
+                }
+            }
+        }
+    }
+    trusted
+}
+
+/// Every bone except those of the chains of `group` (and their followers).
+fn trusted_except(s: &Solver, group: &[usize]) -> Vec<bool> {
+    let t = &s.world.template;
+    let mut trusted = vec![true; t.bones.len()];
+    for &c in group {
+        for &b in &t.chains[c].bones {
+            for x in s.with_followers(b) {
+                trusted[x] = false;
+            }
+        }
+    }
+    trusted
+}
+
 /// Registers the whole skeleton (see the module docs). Returns the iterations run.
 pub fn register_skeleton(
     s: &mut Solver,
@@ -143,6 +183,34 @@ pub fn register_skeleton(
     s.refresh()?;
     let mut before = s.mean_distance();
     let mut iterations = 0;
+    if fresh && s.settings.seed_chains {
+        // Every limb chain gets a first guess before any least-squares fit, so the trunk is
+        // not fitted to the points of limbs that are still far away.
+        s.activity.phase = "seeding";
+        for round in 0..2 {
+            for ci in 1..t.chains.len() {
+                // A chain whose mirror comes earlier was seeded with it.
+                if t.chains[ci].mirror.is_some_and(|m| m < ci) {
+                    continue;
+                }
+                let group: Vec<usize> = match t.chains[ci].mirror {
+                    Some(m) if m > ci => vec![ci, m],
+                    _ => vec![ci],
+                };
+                let trusted = if round == 0 {
+                    trusted_before(s, ci, &group)
+                } else {
+                    trusted_except(s, &group)
+                };
+                let chains: Vec<&[usize]> = group
+                    .iter()
+                    .map(|&c| t.chains[c].bones.as_slice())
+                    .collect();
+                s.seed_chains(&chains, &trusted)?;
+            }
+        }
+        before = s.mean_distance();
+    }
     for it in 0..settings.max_iterations {
         s.activity.iteration = it;
         for (ci, chain) in t.chains.iter().enumerate() {

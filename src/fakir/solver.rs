@@ -5,11 +5,15 @@
 //! [`super::registration`]).
 
 use super::assign::Assignment;
-use super::lm::{EnergyTerms, Limits, OCCUPANCY_SAMPLES, OccupancyTerm, Param, lm_iteration};
+use super::lm::{
+    EnergyTerms, Limits, OCCUPANCY_SAMPLES, OccupancyTerm, PRIOR_MARGIN, Param, RangePrior,
+    lm_iteration,
+};
 use super::world::{End, RadiusClasses, WorldSkeleton};
 use crate::anatomy::template::BoneKind;
 use crate::geometry::{Bone, PreparedBone};
 use crate::math::Vec3;
+use rayon::prelude::*;
 
 /// Most points one slice of an assignment refresh scans (each point also reads its whole row
 /// of distances, so the slice is bounded even when few bones moved).
@@ -62,6 +66,10 @@ pub struct SolverSettings {
     pub refresh_budget: usize,
     /// Add the occupancy term (model → data, [`super::lm::OccupancyTerm`]) to every fit.
     pub occupancy: bool,
+    /// Add the joint-range prior ([`super::lm::RangePrior`]) to every fit.
+    pub range_prior: bool,
+    /// Seed each limb chain's directions before its initial pass ([`Solver::seed_chain`]).
+    pub seed_chains: bool,
 }
 
 impl Default for SolverSettings {
@@ -73,6 +81,8 @@ impl Default for SolverSettings {
             lm_tolerance: 1e-6,
             refresh_budget: 120_000,
             occupancy: true,
+            seed_chains: true,
+            range_prior: true,
         }
     }
 }
@@ -254,6 +264,46 @@ impl<'p> Solver<'p> {
                 })
                 .collect()
         };
+        let prior = self.settings.range_prior.then(|| {
+            let bones = self.world.bones();
+            let total_area: f64 = bones.iter().map(|b| b.area() as f64).sum();
+            let density = self.assignment.len() as f64 / total_area.max(1e-30);
+            RangePrior {
+                bones: energy_bones
+                    .iter()
+                    .filter(|&&b| {
+                        let d = &t.bones[b];
+                        d.kind == BoneKind::Free && (d.bend.is_some() || d.swing_deg > 0.0)
+                    })
+                    .map(|&b| {
+                        let n = density * bones[b].area() as f64;
+                        (b, n.sqrt() * 0.5 * (bones[b].r1 + bones[b].r2) as f64)
+                    })
+                    .collect(),
+                margin: PRIOR_MARGIN,
+                ratios: {
+                    let mut r: Vec<(usize, usize, f32, f64)> = Vec::new();
+                    let weight = |b: usize| {
+                        let n = density * bones[b].area() as f64;
+                        n.sqrt() * 0.5 * (bones[b].r1 + bones[b].r2) as f64
+                    };
+                    for &b in energy_bones {
+                        if let Some((prev, ratio)) = self.limits.prev_ratio[b] {
+                            r.push((b, prev, ratio, weight(b)));
+                        }
+                        for (n, pr) in self.limits.prev_ratio.iter().enumerate() {
+                            if let Some((prev, ratio)) = pr
+                                && *prev == b
+                                && !r.iter().any(|x| x.0 == n)
+                            {
+                                r.push((n, b, *ratio, weight(n)));
+                            }
+                        }
+                    }
+                    r
+                },
+            }
+        });
         for _ in 0..self.settings.lm_iterations {
             let occupancy = match (
                 &self.tree,
@@ -273,6 +323,7 @@ impl<'p> Solver<'p> {
                 members: &self.members,
                 bones: energy_bones,
                 occupancy,
+                prior: prior.clone(),
             };
             if terms.count() == 0 && terms.occupancy.is_none() {
                 return Ok(0.0);
@@ -318,7 +369,7 @@ impl<'p> Solver<'p> {
     /// radius at the pivot (first bone of a chain).
     pub fn one_bone(&mut self, b: usize, free: End, both_radii: bool) -> Result<(), Cancelled> {
         let energy = self.with_followers(b);
-        if self.members_of(&energy) == 0 {
+        if free == End::Second && self.members_of(&energy) == 0 && self.is_lost(b) {
             self.bootstrap(b)?;
         }
 
@@ -453,6 +504,7 @@ impl<'p> Solver<'p> {
             members: &self.members,
             bones,
             occupancy: None,
+            prior: None,
         }
         .energy(&self.world.bones())
     }
@@ -495,50 +547,405 @@ impl<'p> Solver<'p> {
         if count == 0 { 0.0 } else { sum / count as f64 }
     }
 
-    /// Bootstrap of a bone without points (§2.4.1: "rotated around the three axes until some
-    /// input points are projected onto it"): tries 26 directions (the cube's face, edge and
-    /// corner directions) about its first joint and keeps the one that would capture the most
-    /// points (ties: the first in a fixed order). Keeps the current direction when none
-    /// captures any point (a missing limb).
+    /// Whether bone `b` lies in empty space: fewer than a quarter of the samples of its
+    /// visible surface (outside every other bone) have a data point within
+    /// `3 × spacing + r/2` (`r` the bone's smaller radius). A bone hidden inside its
+    /// neighbours (a short spine bone between the pelvis and the thorax) has no visible
+    /// surface and is not lost, even when its `P_k` is empty.
+    pub fn is_lost(&self, b: usize) -> bool {
+        let Some(tree) = &self.tree else { return false };
+        let bones = self.world.bones();
+        let prepared: Vec<PreparedBone> = bones.iter().map(|x| x.prepare()).collect();
+        let limit = 3.0 * self.spacing + 0.5 * bones[b].r1.min(bones[b].r2);
+        let mut rng = crate::rng::Rng::new(0x1057 ^ b as u64);
+        let (mut visible, mut near) = (0usize, 0usize);
+        for _ in 0..64 {
+            let (sp, _) = prepared[b].sample_surface(&mut rng);
+            if prepared
+                .iter()
+                .enumerate()
+                .any(|(o, q)| o != b && q.sdf_fast(sp) < 0.0)
+            {
+                continue;
+            }
+            visible += 1;
+            let nn = tree
+                .query(&sp.to_array())
+                .nearest_one::<kiddo::SquaredEuclidean<f32>>()
+                .execute();
+            if nn.distance.sqrt() <= limit {
+                near += 1;
+            }
+        }
+        visible > 0 && 4 * near < visible
+    }
+
+    /// Bootstrap of a lost bone (§2.4.1: "rotated around the three axes until some input
+    /// points are projected onto it"): the bone is re-aimed by the chain seeding
+    /// ([`Solver::seed_chain`]) with every bone outside its subtree trusted, so it turns
+    /// towards points that nothing else explains. It keeps its direction when no direction
+    /// does better (a missing limb).
     pub fn bootstrap(&mut self, b: usize) -> Result<(), Cancelled> {
-        let mut dirs = Vec::new();
-        for x in -1i32..=1 {
-            for y in -1i32..=1 {
-                for z in -1i32..=1 {
-                    if x != 0 || y != 0 || z != 0 {
-                        dirs.push(Vec3::new(x as f32, y as f32, z as f32).normalize());
+        let t = self.world.template.clone();
+        let mut trusted = vec![true; t.bones.len()];
+        for x in t.subtree(b) {
+            trusted[x] = false;
+        }
+        self.seed_chain(&[b], &trusted)
+    }
+}
+
+/// Points a chain's seeding scores (a fixed stride over the assignment).
+pub const SEED_POINTS: usize = 1500;
+/// Candidate directions of a bone's seeding (plus its current direction).
+pub const SEED_DIRECTIONS: usize = 64;
+/// How far (radians) a seeded direction may leave the bone's joint range (the template's
+/// `bend`/`swing`, which shape the generator's poses), so statue poses beyond the
+/// generator's ranges stay reachable while a left arm cannot be seeded onto the right one
+/// (45°).
+pub const SEED_RANGE_MARGIN: f32 = std::f32::consts::FRAC_PI_4;
+/// Weight of the seeding's prior towards the rest direction: turning a limb around costs
+/// this fraction of what the limb would gain by covering points at full distance, so
+/// directions the data cannot tell apart (a forearm against the chest, folded inside the
+/// upper arm or lying on the ribs) keep the template's.
+pub const SEED_PRIOR: f32 = 0.05;
+/// Lengths tried for each seeded direction (× the bone's current length): proportions vary
+/// by ±30% between statues, and a knee seeded at the wrong distance sends the shin astray.
+pub const SEED_LENGTHS: [f32; 3] = [0.8, 1.0, 1.25];
+/// Candidates of each side that enter the joint search of a mirrored pair.
+pub const SEED_PAIR_SHORTLIST: usize = 16;
+/// Surface samples of a candidate limb (the seeded bone and the rest of its chain) for the
+/// model → data term of the seeding, shared among its bones by area.
+const SEED_SURFACE_SAMPLES: usize = 64;
+
+/// `n` directions spread evenly over the unit sphere (Fibonacci lattice; deterministic).
+pub fn sphere_directions(n: usize) -> Vec<Vec3> {
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    (0..n)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+            let r = (1.0 - y * y).max(0.0).sqrt();
+            let phi = golden * i as f32;
+            Vec3::new(r * phi.cos(), y, r * phi.sin())
+        })
+        .collect()
+}
+
+/// What a seeding candidate is scored against (see [`Solver::seed_chain`]).
+struct SeedContext<'a> {
+    /// Assignment indices of the scored points.
+    idx: &'a [usize],
+    /// Distance of each scored point to the trusted bones, capped.
+    base: &'a [f32],
+    /// The trusted bones, prepared.
+    trusted: Vec<PreparedBone>,
+    /// Scored points per unit of bone area (for the weight of a surface sample).
+    density: f32,
+    cap: f32,
+}
+
+/// Distances of the scored points to a candidate limb (bones `limb`) and its model → data
+/// cost (see [`Solver::seed_chains`]). A point whose distance to the limb's bounding spheres
+/// is not below its distance to the trusted bones cannot gain and is not projected.
+fn seed_eval(
+    a: &Assignment,
+    tree: &kiddo::ImmutableKdTree<f32, 3>,
+    spacing: f32,
+    limb: &[PreparedBone],
+    ctx: &SeedContext,
+    seed: u64,
+) -> (Vec<f32>, f32) {
+    let spheres: Vec<(Vec3, f32)> = limb
+        .iter()
+        .map(|b| {
+            let c = 0.5 * (b.bone.c1 + b.bone.c2);
+            (
+                c,
+                0.5 * (b.bone.c2 - b.bone.c1).length() + b.bone.r1.max(b.bone.r2),
+            )
+        })
+        .collect();
+    let dist: Vec<f32> = ctx
+        .idx
+        .iter()
+        .zip(ctx.base)
+        .map(|(&i, &e)| {
+            let p = a.positions[i];
+            let mut d = f32::INFINITY;
+            for (b, (c, r)) in limb.iter().zip(&spheres) {
+                if (p - *c).length() - r < e.min(d) {
+                    d = d.min(b.project_constrained(p, a.normals[i]).distance);
+                }
+            }
+            d
+        })
+        .collect();
+    let area: f32 = limb.iter().map(|b| b.bone.area()).sum();
+    let mut rng = crate::rng::Rng::new(0x5eed ^ seed);
+    let mut cost = 0.0f32;
+    for (x, b) in limb.iter().enumerate() {
+        let share = b.bone.area() / area.max(1e-30);
+        let k = ((SEED_SURFACE_SAMPLES as f32 * share).ceil() as usize).max(2);
+        let weight = ctx.density * b.bone.area() / k as f32;
+        for _ in 0..k {
+            let (sp, _) = b.sample_surface(&mut rng);
+            if ctx.trusted.iter().any(|q| q.sdf_fast(sp) < 0.0)
+                || limb
+                    .iter()
+                    .enumerate()
+                    .any(|(o, q)| o != x && q.sdf_fast(sp) < 0.0)
+            {
+                continue;
+            }
+            let nn = tree
+                .query(&sp.to_array())
+                .nearest_one::<kiddo::SquaredEuclidean<f32>>()
+                .execute();
+            cost += weight * (nn.distance.sqrt() - spacing).clamp(0.0, ctx.cap);
+        }
+    }
+    (dist, cost)
+}
+
+/// One candidate of a seeding level: the seeded bone's direction and length, the distance of
+/// every scored point to the candidate limb, and the limb's model → data cost.
+struct SeedCandidate {
+    dir: Vec3,
+    len: f32,
+    dist: Vec<f32>,
+    cost: f32,
+}
+
+impl Solver<'_> {
+    /// The candidates of bone `chain[level]` (its direction within the joint range widened by
+    /// [`SEED_RANGE_MARGIN`], current direction first, each of [`SEED_LENGTHS`]), the rest of
+    /// the chain following rigidly.
+    fn seed_candidates(
+        &mut self,
+        chain: &[usize],
+        level: usize,
+        ctx: &SeedContext,
+    ) -> Result<Vec<SeedCandidate>, Cancelled> {
+        let t = self.world.template.clone();
+        let rest_frames = crate::anatomy::skeleton::rest_frames(&t);
+        let b = chain[level];
+        let bones = self.world.bones();
+        let c0 = bones[b].c1;
+        let len = self.world.lengths[b];
+        let axis = self.world.frames[b] * Vec3::X;
+        // The joint range is measured relative to the parent's current frame.
+        let to_rest = match t.bones[b].parent {
+            Some(p) => (self.world.frames[p] * rest_frames[p].inverse()).inverse(),
+            None => self.world.root_rotation.inverse(),
+        };
+        let rest_axis = rest_frames[b] * Vec3::X;
+        let mut dirs = vec![axis];
+        dirs.extend(sphere_directions(SEED_DIRECTIONS).into_iter().filter(|d| {
+            super::init::range_excess(&t, &rest_frames, b, to_rest * *d) <= SEED_RANGE_MARGIN
+        }));
+        let mut out = Vec::with_capacity(dirs.len() * SEED_LENGTHS.len());
+        for (group, ds) in dirs.chunks(8).enumerate() {
+            let Some(tree) = &self.tree else {
+                break;
+            };
+            let jobs: Vec<(Vec3, f32, u64)> = ds
+                .iter()
+                .enumerate()
+                .flat_map(|(k, d)| {
+                    SEED_LENGTHS.iter().enumerate().map(move |(m, f)| {
+                        (
+                            *d,
+                            len * f,
+                            ((group * 8 + k) * SEED_LENGTHS.len() + m) as u64,
+                        )
+                    })
+                })
+                .collect();
+            let (a, spacing) = (&self.assignment, self.spacing);
+            let evaluated: Vec<SeedCandidate> = jobs
+                .par_iter()
+                .map(|&(d, l, seed)| {
+                    let q = crate::geometry::frames::rotation_arc(axis, d);
+                    let shift = (l - len) * d;
+                    let limb: Vec<PreparedBone> = chain[level..]
+                        .iter()
+                        .map(|&j| {
+                            let bj = bones[j];
+                            let (c1, c2) = if j == b {
+                                (c0, c0 + d * l)
+                            } else {
+                                (c0 + q * (bj.c1 - c0) + shift, c0 + q * (bj.c2 - c0) + shift)
+                            };
+                            Bone::new(c1, bj.r1, c2, bj.r2).prepare()
+                        })
+                        .collect();
+                    let (dist, mut cost) = seed_eval(a, tree, spacing, &limb, ctx, seed);
+                    // The prior: leaving the rest direction (relative to the parent) costs up
+                    // to `SEED_PRIOR` of what the whole limb could gain.
+                    let area: f32 = limb.iter().map(|x| x.bone.area()).sum();
+                    let turn = 0.5 * (1.0 - (to_rest * d).dot(rest_axis));
+                    cost += SEED_PRIOR * turn * ctx.density * area * ctx.cap;
+                    SeedCandidate {
+                        dir: d,
+                        len: l,
+                        dist,
+                        cost,
                     }
+                })
+                .collect();
+            out.extend(evaluated);
+            self.unit()?;
+        }
+        Ok(out)
+    }
+
+    /// Aims bone `b` along `dir` with length `len` (its subtree follows).
+    fn seed_apply(&mut self, b: usize, dir: Vec3, len: f32) {
+        let axis = self.world.frames[b] * Vec3::X;
+        if dir != axis || len != self.world.lengths[b] {
+            self.world
+                .rotate_subtree(b, crate::geometry::frames::rotation_arc(axis, dir));
+            self.world.lengths[b] = len;
+            self.world.enforce();
+        }
+    }
+
+    /// **Chain seeding** (our addition to the bootstrap of §2.4.1, for statues whose limbs are
+    /// far from the template's rest pose: raised arms, crossed legs, a hand on the head).
+    /// Before any least-squares fit, the bones of `chains` (one chain, or a chain and its
+    /// mirror, seeded together) are aimed level by level from the anchor out: each bone takes
+    /// the best of [`SEED_DIRECTIONS`] directions spread over the sphere (within its joint
+    /// range widened by [`SEED_RANGE_MARGIN`]; its current direction first, ties keep it) and
+    /// of [`SEED_LENGTHS`]. The rest of its chain follows rigidly and is scored with it, so a
+    /// bone cannot steal the points of the bones after it (a clavicle stretched down the arm).
+    /// A candidate limb is scored two-sidedly on [`SEED_POINTS`] points:
+    ///
+    /// * **gain** (data → model): `Σ_p max(0, min(e_p, cap) − d_p)`, where `d_p` is the
+    ///   normal-constrained distance of `p` to the candidate limb and `e_p` its distance to the
+    ///   *trusted* bones (`trusted`, plus the bones already seeded); `cap` = 10% of the statue's
+    ///   size, so points far from everything count alike;
+    /// * **cost** (model → data): for samples of the limb's surface outside the trusted bones,
+    ///   `min(max(0, q_s − spacing), cap)` times the points a sample stands for at the cloud's
+    ///   mean density (`q_s`: distance to the nearest data point), so a limb in empty space pays
+    ///   what it would gain by covering points.
+    ///
+    /// The lowest `cost − gain` wins. A mirrored pair is chosen jointly (every pair of
+    /// candidates, the gain counting each point once, for the nearer limb), so the left leg
+    /// cannot take the right leg's points and push the right leg elsewhere. Every 8 directions
+    /// of a bone, and every 8 rows of a pair search, are one work unit.
+    pub fn seed_chains(&mut self, chains: &[&[usize]], trusted: &[bool]) -> Result<(), Cancelled> {
+        let n = self.assignment.len();
+        if n == 0 || self.tree.is_none() {
+            return Ok(());
+        }
+        let stride = n.div_ceil(SEED_POINTS).max(1);
+        let idx: Vec<usize> = (0..n).step_by(stride).collect();
+        let cap = 0.1 * self.size;
+        let mut trusted = trusted.to_vec();
+        let levels = chains.iter().map(|c| c.len()).max().unwrap_or(0);
+        for level in 0..levels {
+            let bones = self.world.bones();
+            let trusted_prepared: Vec<PreparedBone> = (0..bones.len())
+                .filter(|&x| trusted[x])
+                .map(|x| bones[x].prepare())
+                .collect();
+            let a = &self.assignment;
+            let base: Vec<f32> = idx
+                .iter()
+                .map(|&i| {
+                    trusted_prepared
+                        .iter()
+                        .map(|x| x.project_constrained(a.positions[i], a.normals[i]).distance)
+                        .fold(cap, f32::min)
+                })
+                .collect();
+            // Points already explained by the trusted bones cannot gain (much): left out.
+            let min_gain = 2.0 * self.spacing;
+            let (idx_active, base): (Vec<usize>, Vec<f32>) = idx
+                .iter()
+                .zip(&base)
+                .filter(|(_, e)| **e > min_gain)
+                .map(|(i, e)| (*i, *e))
+                .unzip();
+            let total_area: f32 = bones.iter().map(|x| x.area()).sum();
+            let ctx = SeedContext {
+                idx: &idx_active,
+                base: &base,
+                trusted: trusted_prepared,
+                density: idx.len() as f32 / total_area.max(1e-30),
+                cap,
+            };
+            let active: Vec<&[usize]> =
+                chains.iter().copied().filter(|c| level < c.len()).collect();
+            let mut sets = Vec::with_capacity(active.len());
+            for c in &active {
+                sets.push(self.seed_candidates(c, level, &ctx)?);
+            }
+            let gain =
+                |d: &[f32]| -> f32 { base.iter().zip(d).map(|(e, d)| (e - d).max(0.0)).sum() };
+            let choice: Vec<usize> = if sets.len() == 2 {
+                let (sa, sb) = (&sets[0], &sets[1]);
+                // The pair search runs over each side's best `SEED_PAIR_SHORTLIST` candidates
+                // on their own.
+                let shortlist = |set: &[SeedCandidate]| -> Vec<usize> {
+                    let mut order: Vec<(f32, usize)> = set
+                        .iter()
+                        .enumerate()
+                        .map(|(i, c)| (c.cost - gain(&c.dist), i))
+                        .collect();
+                    order.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+                    order.truncate(SEED_PAIR_SHORTLIST);
+                    order.into_iter().map(|(_, i)| i).collect()
+                };
+                let (la, lb) = (shortlist(sa), shortlist(sb));
+                let mut best = (f32::INFINITY, la[0], lb[0]);
+                for (row, &ia) in la.iter().enumerate() {
+                    let ca = &sa[ia];
+                    for &ib in &lb {
+                        let cb = &sb[ib];
+                        let g: f32 = base
+                            .iter()
+                            .zip(ca.dist.iter().zip(&cb.dist))
+                            .map(|(e, (x, y))| (e - x.min(*y)).max(0.0))
+                            .sum();
+                        let score = ca.cost + cb.cost - g;
+                        if score < best.0 {
+                            best = (score, ia, ib);
+                        }
+                    }
+                    if row % 8 == 7 {
+                        self.unit()?;
+                    }
+                }
+                vec![best.1, best.2]
+            } else {
+                sets.iter()
+                    .map(|set| {
+                        let mut best = (f32::INFINITY, 0usize);
+                        for (i, c) in set.iter().enumerate() {
+                            let score = c.cost - gain(&c.dist);
+                            if score < best.0 {
+                                best = (score, i);
+                            }
+                        }
+                        best.1
+                    })
+                    .collect()
+            };
+            for ((c, set), k) in active.iter().zip(&sets).zip(choice) {
+                let b = c[level];
+                self.seed_apply(b, set[k].dir, set[k].len);
+                for x in self.with_followers(b) {
+                    trusted[x] = true;
                 }
             }
         }
-        let axis = self.world.frames[b] * Vec3::X;
-        let n = self.assignment.len();
-        let mut best = (0usize, None::<Vec3>);
-        for d in dirs {
-            let mut trial = self.world.clone();
-            trial.rotate_subtree(b, crate::geometry::frames::rotation_arc(axis, d));
-            trial.enforce();
-            let pb = trial.bones()[b].prepare();
-            let a = &self.assignment;
-            let captured = (0..n)
-                .filter(|&i| {
-                    pb.project_constrained(a.positions[i], a.normals[i])
-                        .distance
-                        < a.own_distance(i)
-                })
-                .count();
-            if captured > best.0 {
-                best = (captured, Some(d));
-            }
-            self.unit()?;
-        }
-        if let Some(d) = best.1 {
-            self.world
-                .rotate_subtree(b, crate::geometry::frames::rotation_arc(axis, d));
-            self.world.enforce();
-            self.refresh()?;
-        }
-        Ok(())
+        self.refresh()
+    }
+
+    /// One chain's seeding ([`Solver::seed_chains`] with a single chain).
+    pub fn seed_chain(&mut self, chain: &[usize], trusted: &[bool]) -> Result<(), Cancelled> {
+        self.seed_chains(&[chain], trusted)
     }
 }
 

@@ -102,6 +102,8 @@ pub struct WorldSkeleton {
     /// Rest rotation of each bone relative to its parent (constraints use it); shared, as
     /// the LM clones the world skeleton several times per iteration.
     rest_relative: Arc<[Quat]>,
+    /// World frames of the template's rest pose (the joint-range prior compares against them).
+    pub rest_frames: Arc<[Quat]>,
     /// Rest lengths and radii of the template (unscaled).
     rest_lengths: Arc<[f32]>,
 }
@@ -120,6 +122,7 @@ impl WorldSkeleton {
             lengths: s.bones.iter().map(|b| b.length).collect(),
             r1: s.bones.iter().map(|b| b.r1).collect(),
             r2: s.bones.iter().map(|b| b.r2).collect(),
+            rest_frames: crate::anatomy::skeleton::rest_frames(&s.template).into(),
             rest_relative: rest
                 .bones
                 .iter()
@@ -231,6 +234,16 @@ impl WorldSkeleton {
         let q = crate::geometry::frames::rotation_arc(axis, d / len);
         self.frames[b] = (q * self.frames[b]).normalize();
         self.lengths[b] = len;
+    }
+
+    /// Direction of bone `b` relative to its parent, expressed in the template's rest frame
+    /// (what [`crate::fakir::init::range_excess`] measures).
+    pub fn direction_at_rest(&self, b: usize) -> Vec3 {
+        let to_rest = match self.template.bones[b].parent {
+            Some(p) => (self.frames[p] * self.rest_frames[p].inverse()).inverse(),
+            None => self.root_rotation.inverse(),
+        };
+        to_rest * (self.frames[b] * Vec3::X)
     }
 
     /// Sets the radius of a bone end and of every end sharing it.
