@@ -103,7 +103,10 @@ fn info_synth_normals_and_register_write_what_they_promise() {
     let t = pygmalion::anatomy::Skeleton::load_json(&truth, None).unwrap();
     let f = pygmalion::anatomy::Skeleton::load_json(&refit, None).unwrap();
     let err = f.mean_joint_distance(&t);
-    assert!(err < 0.005, "refit from the truth drifted by {err} (height 1)");
+    assert!(
+        err < 0.005,
+        "refit from the truth drifted by {err} (height 1)"
+    );
     let missing = dir.join("missing.json");
     let e = run(args(&[
         "register",

@@ -17,7 +17,7 @@ use rayon::prelude::*;
 
 /// Most points one slice of an assignment refresh scans (each point also reads its whole row
 /// of distances, so the slice is bounded even when few bones moved).
-pub const MAX_REFRESH_SLICE: usize = 16_384;
+pub const MAX_REFRESH_SLICE: usize = 8_192;
 
 /// Raised by a pause hook to abandon the registration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -79,7 +79,7 @@ impl Default for SolverSettings {
             one_bone_rounds: 4,
             two_bone_rounds: 4,
             lm_tolerance: 1e-6,
-            refresh_budget: 120_000,
+            refresh_budget: 30_000,
             occupancy: true,
             seed_chains: true,
             range_prior: true,
@@ -196,7 +196,7 @@ impl<'p> Solver<'p> {
         let n = self.assignment.len();
         // Bounded work per slice: projections (budget / bones moved) and rows scanned.
         let slice =
-            (self.settings.refresh_budget / moved.len().max(1)).clamp(1024, MAX_REFRESH_SLICE);
+            (self.settings.refresh_budget / moved.len().max(1)).clamp(512, MAX_REFRESH_SLICE);
         let mut start = 0;
         let prev_phase = self.activity.phase;
         self.activity.phase = "assignment";
