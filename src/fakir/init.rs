@@ -25,7 +25,7 @@
 //! 6. **Anatomy decides near-ties**: a figure registered facing backwards can fit as well as
 //!    the right one (a human's sphere-mesh is nearly front/back symmetric; only feet, knees
 //!    and elbows tell), which would swap left and right. Among the full registrations whose
-//!    two-sided score is within 15% of the best, the one whose pose lies least outside the
+//!    two-sided score is within 50% of the best, the one whose pose lies least outside the
 //!    template's joint ranges ([`implausibility`]) wins.
 
 use crate::anatomy::{Skeleton, Template};

@@ -277,12 +277,13 @@ pub fn register(
         let implausible = super::init::implausibility(&s.world.to_skeleton());
         finals.push((score, implausible, ci, s.world.clone(), s.units, iterations));
     }
-    // Near-ties (within 15% of the best score) are decided by anatomy (see `init`).
+    // Near-ties (within 50% of the best score) are decided by anatomy (see `init`): a
+    // well-fitted figure facing the right way keeps its knees, elbows and feet in range.
     let best_score = finals.iter().map(|f| f.0).fold(f64::INFINITY, f64::min);
     let pick = finals
         .iter()
         .enumerate()
-        .filter(|(_, f)| f.0 <= 1.15 * best_score)
+        .filter(|(_, f)| f.0 <= 1.5 * best_score)
         .min_by(|(_, a), (_, b)| a.1.total_cmp(&b.1).then(a.0.total_cmp(&b.0)))
         .map(|(i, _)| i)
         .expect("at least one finalist");
