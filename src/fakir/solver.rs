@@ -744,7 +744,7 @@ impl Solver<'_> {
             super::init::range_excess(&t, &rest_frames, b, to_rest * *d) <= SEED_RANGE_MARGIN
         }));
         let mut out = Vec::with_capacity(dirs.len() * SEED_LENGTHS.len());
-        for (group, ds) in dirs.chunks(8).enumerate() {
+        for (group, ds) in dirs.chunks(4).enumerate() {
             let Some(tree) = &self.tree else {
                 break;
             };
@@ -756,7 +756,7 @@ impl Solver<'_> {
                         (
                             *d,
                             len * f,
-                            ((group * 8 + k) * SEED_LENGTHS.len() + m) as u64,
+                            ((group * 4 + k) * SEED_LENGTHS.len() + m) as u64,
                         )
                     })
                 })
@@ -831,8 +831,9 @@ impl Solver<'_> {
     ///
     /// The lowest `cost − gain` wins. A mirrored pair is chosen jointly (every pair of
     /// candidates, the gain counting each point once, for the nearer limb), so the left leg
-    /// cannot take the right leg's points and push the right leg elsewhere. Every 8 directions
-    /// of a bone, and every 8 rows of a pair search, are one work unit.
+    /// cannot take the right leg's points and push the right leg elsewhere. Every 4 directions
+    /// of a bone, every 4 rows of a pair search, and the distances to the trusted bones are one
+    /// work unit each.
     pub fn seed_chains(&mut self, chains: &[&[usize]], trusted: &[bool]) -> Result<(), Cancelled> {
         let n = self.assignment.len();
         if n == 0 || self.tree.is_none() {
@@ -859,6 +860,8 @@ impl Solver<'_> {
                         .fold(cap, f32::min)
                 })
                 .collect();
+            // The distances to the trusted bones are a unit of their own.
+            self.unit()?;
             // Points already explained by the trusted bones cannot gain (much): left out.
             let min_gain = 2.0 * self.spacing;
             let (idx_active, base): (Vec<usize>, Vec<f32>) = idx
@@ -913,7 +916,7 @@ impl Solver<'_> {
                             best = (score, ia, ib);
                         }
                     }
-                    if row % 8 == 7 {
+                    if row % 4 == 3 {
                         self.unit()?;
                     }
                 }
