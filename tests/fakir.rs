@@ -643,6 +643,16 @@ fn sphere_directions_cover_the_sphere_evenly() {
 
 #[test]
 fn registration_of_posed_statues_with_stylised_proportions() {
+    // On a pool of its own, so the kiosk's frame-budget test running beside it does not queue
+    // behind this registration's parallel loops.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    pool.install(posed_statues_registration);
+}
+
+fn posed_statues_registration() {
     use pygmalion::fakir::{Registration, RegistrationOptions};
     use std::sync::Arc;
     // Random statue-like poses, ±30% proportions, a random rigid motion, automatic

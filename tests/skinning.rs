@@ -327,3 +327,68 @@ fn a_saved_binding_loads_back_and_deforms_identically() {
     let err = Binding::load(&path, other).unwrap_err().to_string();
     assert!(err.contains("human"), "{err}");
 }
+
+/// The bench's worst case on a human: every free joint bent by 0.4 rad about an oblique axis,
+/// twisted by 0.3 rad, every bone 10% longer.
+fn worst_case(fitted: &Skeleton) -> Skeleton {
+    let mut s = fitted.clone();
+    for (b, def) in s.bones.iter_mut().zip(&fitted.template.bones) {
+        if def.kind == pygmalion::anatomy::BoneKind::Free && def.parent.is_some() {
+            b.rotation = (b.rotation
+                * Quat::from_axis_angle(Vec3::new(0.0, 0.6, 0.8), 0.4)
+                * Quat::from_rotation_x(0.3))
+            .normalize();
+        }
+        b.length *= 1.1;
+    }
+    s.enforce_constraints();
+    s
+}
+
+/// Heightfield skinning tabulates the bend per frame (see `skinning::heightfield`): points
+/// outside the joints' zones are exactly where the per-point iteration of Algorithm 2 puts
+/// them, and inside the zones the table stays close to it (it smooths where the iteration
+/// itself jumps, at the sides of a bend: the maxima, printed, sit there).
+#[test]
+fn tabulated_heightfield_bend_matches_the_per_point_iteration() {
+    let cases = {
+        let (cloud, skel) = human(17, 40_000);
+        let target = worst_case(&skel);
+        let (lc, ls) = limb(20_000);
+        let lt = rotate_child(&ls, Quat::from_rotation_z(std::f32::consts::FRAC_PI_2));
+        // (name, cloud, skeleton, target, size, p99 and rms bounds relative to the size)
+        vec![
+            ("human", cloud, skel, target, 1.0, 2e-3, 1e-3),
+            ("elbow", lc, ls, lt, 2.0, 3e-3, 1e-3),
+        ]
+    };
+    for (name, cloud, skel, target, size, p99_max, rms_max) in cases {
+        let bind = Binding::new(&cloud, &skel).unwrap();
+        let fast = bind.deform_cloud(&target, Method::Heightfield).unwrap();
+        let slow = bind.deform_heightfield_reference(&target).unwrap();
+        let partner = &bind.points().partner;
+        let mut zone = Vec::new();
+        let mut outside = 0.0f32;
+        for ((a, b), &m) in fast.positions.iter().zip(&slow.positions).zip(partner) {
+            let d = (*a - *b).length() / size;
+            if m == u16::MAX {
+                outside = outside.max(d);
+            } else {
+                zone.push(d);
+            }
+        }
+        zone.sort_by(f32::total_cmp);
+        let p99 = zone[zone.len() * 99 / 100];
+        let rms = (zone.iter().map(|x| x * x).sum::<f32>() / zone.len() as f32).sqrt();
+        let max = zone.last().copied().unwrap_or(0.0);
+        eprintln!(
+            "{name}: outside the zones {outside:.1e}; in them p99 {p99:.1e} rms {rms:.1e} max {max:.1e}"
+        );
+        assert!(outside <= 1e-6, "{name}: rigid points moved by {outside}");
+        assert!(
+            p99 <= p99_max && rms <= rms_max,
+            "{name}: p99 {p99}, rms {rms}"
+        );
+        assert!(fast.positions.iter().all(|p| p.is_finite()), "{name}: NaN");
+    }
+}

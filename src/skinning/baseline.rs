@@ -57,9 +57,18 @@
 //! 3·10⁻⁴ across `ψ` and below 10⁻³ across `t` at the joint arcs). Points outside the grid's
 //! `t` range (about 3%, far past a key point, mostly hidden inside the neighbouring bone) move
 //! rigidly with their bone, like the free caps.
+//!
+//! Per frame the tables are built in parallel (joint sides and curves per bone, the grid per
+//! bone; a grid sample interpolates only the part of the curve that holds it). Per point the
+//! pass reads 40 bytes (slot, height, residual, normal) and four 48-byte cells: eight points
+//! at a time, each point's cells are blended as 12-float vectors, then the eight detail-frame
+//! rotations and compositions run in [`super::lanes`] vectors. The rigidly moving points are
+//! copied at bind time into a stream of their own ([`Rigid`], derived, not saved), so that
+//! the pass does not fetch them from arrays it otherwise never touches.
 
 use super::binding::{BoneBind, PointData};
 use super::frame::BoneFrame;
+use super::lanes::{F8, L, V3};
 use super::surface::{CAP1, CAP2};
 use crate::geometry::frames::rotation_arc;
 use crate::math::{Mat3, Quat, Vec3};
@@ -241,24 +250,33 @@ pub const GRID_NPSI: usize = 32;
 /// One grid cell, in world coordinates of the pose: the base point, the (unnormalised)
 /// detail direction, the rotation that carries a point's detail frame from the fitted pose to
 /// this one (bone frame, twist offset, shortest arc from the fitted detail direction to the
-/// new one) and the height scale (the bone's radius ratio at `t`).
+/// new one) and the height scale (the bone's radius ratio at `t`), as
+/// `[p (3), n (3), q (x, y, z, w), hs, 0]`: 48 bytes, three 16-byte groups.
 #[derive(Clone, Copy, Debug)]
-pub struct Cell {
-    p: Vec3,
-    n: Vec3,
-    /// Rotation quaternion `(x, y, z, w)`, unaligned to keep the cell at 44 bytes.
-    q: [f32; 4],
-    hs: f32,
+#[repr(C, align(16))]
+pub struct Cell([f32; 12]);
+
+impl Cell {
+    fn new(p: Vec3, n: Vec3, q: Quat, hs: f32) -> Cell {
+        Cell([p.x, p.y, p.z, n.x, n.y, n.z, q.x, q.y, q.z, q.w, hs, 0.0])
+    }
+    #[inline(always)]
+    fn p(&self) -> Vec3 {
+        Vec3::new(self.0[0], self.0[1], self.0[2])
+    }
+    #[inline(always)]
+    fn n(&self) -> Vec3 {
+        Vec3::new(self.0[3], self.0[4], self.0[5])
+    }
+    #[inline(always)]
+    fn q(&self) -> Quat {
+        Quat::from_xyzw(self.0[6], self.0[7], self.0[8], self.0[9])
+    }
 }
 
 impl Default for Cell {
     fn default() -> Self {
-        Cell {
-            p: Vec3::ZERO,
-            n: Vec3::X,
-            q: [0.0, 0.0, 0.0, 1.0],
-            hs: 1.0,
-        }
+        Cell::new(Vec3::ZERO, Vec3::X, Quat::IDENTITY, 1.0)
     }
 }
 
@@ -287,56 +305,68 @@ pub fn build_tables(
             })
             .collect();
     }
-    for (k, bb) in bones.iter().enumerate() {
-        let Some(p) = bb.c1_partner else { continue };
-        let fk = &frames[k];
-        let fp = &frames[p];
-        let jp = Vec3::new(fp.shape.length, 0.0, 0.0);
-        let rt = fk.rel_new.transpose();
-        let (st, ct) = fk.tau_new.sin_cos();
-        for i in 0..TABLE {
-            let [c, s] = out.cs[i];
-            // Child side: azimuth ψ of k ↔ ψ + τ of the parent.
-            let (cp, sp) = (c * ct - s * st, s * ct + c * st);
-            let kp = key(fp, fk, cp, sp);
-            let d1 = rt * kp.d;
-            let n_k = fk.shape.cone_normal_cs(c, s);
-            out.child[k * TABLE + i] = if kp.cross {
-                Side {
-                    p: rt * (kp.s - jp),
-                    n: d1,
-                    d0: d1,
-                    r0: kp.r,
-                    r1: kp.r,
-                    ..Default::default()
-                }
-            } else {
-                Side::arc(fk.shape.r1 * n_k, n_k, d1, kp.r, n_k, fk.shape.r1)
+    let cs = &out.cs;
+    out.child
+        .par_chunks_mut(TABLE)
+        .zip(out.parent.par_chunks_mut(TABLE))
+        .enumerate()
+        .for_each(|(k, (child, parent))| {
+            let Some(p) = bones[k].c1_partner else {
+                return;
             };
-            // Parent side: azimuth ψ of p.
-            let kc = key(fp, fk, c, s);
-            let n_p = fp.shape.cone_normal_cs(c, s);
-            out.parent[k * TABLE + i] = if kc.cross {
-                Side {
-                    p: kc.s,
-                    n: kc.d,
-                    d0: kc.d,
-                    r0: kc.r,
-                    r1: kc.r,
-                    ..Default::default()
-                }
-            } else {
-                Side::arc(jp + fp.shape.r2 * n_p, n_p, n_p, fp.shape.r2, kc.d, kc.r)
-            };
-        }
-    }
-    out.curves.resize(n * TABLE, Curve::default());
-    for k in 0..n {
-        for i in 0..TABLE {
-            let c = curve_sample(k, i, frames, bones, out);
-            out.curves[k * TABLE + i] = c;
-        }
-    }
+            let fk = &frames[k];
+            let fp = &frames[p];
+            let jp = Vec3::new(fp.shape.length, 0.0, 0.0);
+            let rt = fk.rel_new.transpose();
+            let (st, ct) = fk.tau_new.sin_cos();
+            for (i, (child, parent)) in child.iter_mut().zip(parent.iter_mut()).enumerate() {
+                let [c, s] = cs[i];
+                // Child side: azimuth ψ of k ↔ ψ + τ of the parent.
+                let (cp, sp) = (c * ct - s * st, s * ct + c * st);
+                let kp = key(fp, fk, cp, sp);
+                let d1 = rt * kp.d;
+                let n_k = fk.shape.cone_normal_cs(c, s);
+                *child = if kp.cross {
+                    Side {
+                        p: rt * (kp.s - jp),
+                        n: d1,
+                        d0: d1,
+                        r0: kp.r,
+                        r1: kp.r,
+                        ..Default::default()
+                    }
+                } else {
+                    Side::arc(fk.shape.r1 * n_k, n_k, d1, kp.r, n_k, fk.shape.r1)
+                };
+                // Parent side: azimuth ψ of p.
+                let kc = key(fp, fk, c, s);
+                let n_p = fp.shape.cone_normal_cs(c, s);
+                *parent = if kc.cross {
+                    Side {
+                        p: kc.s,
+                        n: kc.d,
+                        d0: kc.d,
+                        r0: kc.r,
+                        r1: kc.r,
+                        ..Default::default()
+                    }
+                } else {
+                    Side::arc(jp + fp.shape.r2 * n_p, n_p, n_p, fp.shape.r2, kc.d, kc.r)
+                };
+            }
+        });
+    let mut curves = std::mem::take(&mut out.curves);
+    curves.resize(n * TABLE, Curve::default());
+    let sides: &Tables = out;
+    curves
+        .par_chunks_mut(TABLE)
+        .enumerate()
+        .for_each(|(k, row)| {
+            for (i, c) in row.iter_mut().enumerate() {
+                *c = curve_sample(k, i, frames, bones, sides);
+            }
+        });
+    out.curves = curves;
     // The (t, ψ) grid, one block per bone, in parallel.
     let per_bone = GRID_NT * GRID_NPSI;
     let mut grid = std::mem::take(&mut out.grid);
@@ -362,8 +392,7 @@ pub fn build_tables(
                 let hs = fk.radius_ratio[0] + (fk.radius_ratio[1] - fk.radius_ratio[0]) * tc;
                 for (m, (cell, nl)) in row.iter_mut().zip(nrow.iter_mut()).enumerate() {
                     let psi = std::f32::consts::TAU * m as f32 / GRID_NPSI as f32;
-                    let cv = curve(k, psi + off, tables);
-                    let (p, nb) = cv.at(t * cv.len());
+                    let (p, nb) = curve_at(k, psi + off, t, tables);
                     let q = match fit_normals {
                         Some(fit) => {
                             let n_fit = twist * fit[k * per_bone + j * GRID_NPSI + m];
@@ -371,13 +400,15 @@ pub fn build_tables(
                         }
                         None => twist,
                     };
-                    *nl = nb;
-                    *cell = Cell {
-                        p: fk.rot * p + fk.origin,
-                        n: fk.rot * nb,
-                        q: (fk.rot_q * q).normalize().to_array(),
+                    if fit_normals.is_none() {
+                        *nl = nb;
+                    }
+                    *cell = Cell::new(
+                        fk.rot * p + fk.origin,
+                        fk.rot * nb,
+                        (fk.rot_q * q).normalize(),
                         hs,
-                    };
+                    );
                 }
             }
         });
@@ -497,6 +528,42 @@ fn curve(k: usize, psi: f32, tables: &Tables) -> Curve {
     )
 }
 
+/// `curve(k, psi).at(t · len)`, interpolating only the part of the curve that holds the
+/// point (the same values, fewer operations).
+#[inline]
+fn curve_at(k: usize, psi: f32, t: f32, tables: &Tables) -> (Vec3, Vec3) {
+    let u = psi * (TABLE as f32 / std::f32::consts::TAU) + (4 * TABLE) as f32;
+    let fl = u as usize;
+    let f = u - fl as f32;
+    let i0 = fl % TABLE;
+    let i1 = (i0 + 1) % TABLE;
+    let (x, y) = (
+        &tables.curves[k * TABLE + i0],
+        &tables.curves[k * TABLE + i1],
+    );
+    let g = 1.0 - f;
+    let l1 = x.arc1.len * g + y.arc1.len * f;
+    let seg = x.seg * g + y.seg * f;
+    let l2 = x.arc2.len * g + y.arc2.len * f;
+    let lambda = t * (l1 + seg + l2);
+    if lambda < l1 && l1 > 1e-12 {
+        return Side::lerp(&x.arc1, &y.arc1, f).at(Vec3::ZERO, lambda / l1);
+    }
+    let l12 = l1 + seg;
+    if lambda > l12 && l2 > 1e-12 {
+        return Side::lerp(&x.arc2, &y.arc2, f).at(x.c2, (lambda - l12) / l2);
+    }
+    let (a, b) = (x.a * g + y.a * f, x.b * g + y.b * f);
+    let (na, nb) = (x.na * g + y.na * f, x.nb * g + y.nb * f);
+    let fs = if seg > 1e-12 {
+        (lambda - l1) / seg
+    } else {
+        0.0
+    };
+    let fc = fs.clamp(0.0, 1.0);
+    (a + (b - a) * fs, (na + (nb - na) * fc).normalize_or(na))
+}
+
 /// The shortest-arc rotation between unit vectors without trigonometry (half-way vector
 /// form); the rare near-opposite case falls back to [`rotation_arc`].
 #[inline]
@@ -524,34 +591,32 @@ pub fn grid_slot(k: usize, t: f32, psi: f32) -> Option<(u32, [f32; 2])> {
     Some((cell as u32, [u - j as f32, fv]))
 }
 
+/// A cell with the identity rotation (filler for points without a cell).
+const IDENTITY_CELL: [f32; 12] = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0];
+
 /// Bilinear interpolation of the grid at a slot.
-#[inline]
+#[inline(always)]
 fn grid_fetch(cell: u32, [fu, fv]: [f32; 2], grid: &[Cell]) -> Cell {
     const _: () = assert!(GRID_NPSI.is_power_of_two());
     let c = cell as usize;
     let m0 = c & (GRID_NPSI - 1);
     let c01 = c - m0 + ((m0 + 1) & (GRID_NPSI - 1));
     let (c00, c01, c10, c11) = (
-        &grid[c],
-        &grid[c01],
-        &grid[c + GRID_NPSI],
-        &grid[c01 + GRID_NPSI],
+        &grid[c].0,
+        &grid[c01].0,
+        &grid[c + GRID_NPSI].0,
+        &grid[c01 + GRID_NPSI].0,
     );
     let w00 = (1.0 - fu) * (1.0 - fv);
     let w01 = (1.0 - fu) * fv;
     let w10 = fu * (1.0 - fv);
     let w11 = fu * fv;
     // Quaternions of neighbouring cells are close (same hemisphere): plain blend.
-    let mut q = [0.0; 4];
-    for (i, qi) in q.iter_mut().enumerate() {
-        *qi = c00.q[i] * w00 + c01.q[i] * w01 + c10.q[i] * w10 + c11.q[i] * w11;
+    let mut r = [0.0; 12];
+    for (i, ri) in r.iter_mut().enumerate() {
+        *ri = c00[i] * w00 + c01[i] * w01 + c10[i] * w10 + c11[i] * w11;
     }
-    Cell {
-        p: c00.p * w00 + c01.p * w01 + c10.p * w10 + c11.p * w11,
-        n: c00.n * w00 + c01.n * w01 + c10.n * w10 + c11.n * w11,
-        q,
-        hs: c00.hs * w00 + c01.hs * w01 + c10.hs * w10 + c11.hs * w11,
-    }
+    Cell(r)
 }
 
 /// Cubic interpolation `α(t) = 3t² − 2t³` on `[0, 1]`.
@@ -629,41 +694,187 @@ pub fn bind(
         return PointBaseline::rigid();
     };
     let c = grid_fetch(cell, uv, &tables.grid);
-    let q = Quat::from_array(c.q).normalize();
-    let n2 = c.n.length_squared().max(1e-30);
-    let h = (world - c.p).dot(c.n) / n2;
+    let (cp, cn) = (c.p(), c.n());
+    let q = c.q().normalize();
+    let n2 = cn.length_squared().max(1e-30);
+    let h = (world - cp).dot(cn) / n2;
     let inv = q.inverse();
     PointBaseline {
         cell,
         uv,
         h,
-        res: inv * (world - c.p - h * c.n),
+        res: inv * (world - cp - h * cn),
         n: inv * normal,
     }
 }
 
-/// Deforms point `i` (output: world position and normal).
-#[inline]
-pub fn deform_point(
-    i: usize,
+/// The points without a grid cell (they move rigidly with their bone), gathered at bind time
+/// in point order so that the per-frame pass reads them as a stream: for each block of
+/// [`CHUNK`] points the index of its first one, then per point its bone, part, base point
+/// encoding, height and normal. Derived from the per-point arrays, not saved.
+#[derive(Clone, Debug, Default)]
+pub struct Rigid {
+    block_start: Vec<u32>,
+    rec: Vec<RigidPoint>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct RigidPoint {
+    bone: u16,
+    part: u8,
+    s: f32,
+    dir: Vec3,
+    height: f32,
+    normal: Vec3,
+}
+
+/// Points per block of the per-frame pass (and per parallel task).
+pub const CHUNK: usize = 4096;
+
+impl Rigid {
+    /// The rigid points of `pts`.
+    pub fn new(pts: &PointData) -> Rigid {
+        let mut r = Rigid::default();
+        for (i, &c) in pts.bl_cell.iter().enumerate() {
+            if i % CHUNK == 0 {
+                r.block_start.push(r.rec.len() as u32);
+            }
+            if c == NO_CELL {
+                r.rec.push(RigidPoint {
+                    bone: pts.bone[i],
+                    part: pts.part[i],
+                    s: pts.s[i],
+                    dir: pts.dir[i],
+                    height: pts.height[i],
+                    normal: pts.normal[i],
+                });
+            }
+        }
+        r
+    }
+}
+
+/// `v ↦ q v q*` for unit quaternions `q = (x, y, z, w)`: `v + 2w (u × v) + 2 u × (u × v)`.
+#[inline(always)]
+fn rotate([qx, qy, qz, qw]: [F8; 4], v: V3) -> V3 {
+    let c = V3 {
+        x: qy * v.z - qz * v.y,
+        y: qz * v.x - qx * v.z,
+        z: qx * v.y - qy * v.x,
+    };
+    let cc = V3 {
+        x: qy * c.z - qz * c.y,
+        y: qz * c.x - qx * c.z,
+        z: qx * c.y - qy * c.x,
+    };
+    v + (c.scale(qw) + cc).scale(F8::splat(2.0))
+}
+
+/// A rigid point moved with its bone.
+#[cold]
+fn rigid_point(r: &RigidPoint, frames: &[BoneFrame]) -> (Vec3, Vec3) {
+    let Some(fk) = frames.get(r.bone as usize) else {
+        return (Vec3::ZERO, Vec3::X);
+    };
+    let (b, nb) = fk.shape.decode(r.part, r.s, r.dir);
+    let f = fk.shape.axial_fraction(r.part, r.s);
+    let hs = fk.radius_ratio[0] + (fk.radius_ratio[1] - fk.radius_ratio[0]) * f;
+    let x = b + hs * r.height * nb;
+    (fk.rot * x + fk.origin, fk.rot * r.normal)
+}
+
+/// Deforms every point into `out_p` (world positions) and `out_n` (world normals), in
+/// parallel blocks of [`CHUNK`].
+pub fn deform(
     pts: &PointData,
+    rigid: &Rigid,
     frames: &[BoneFrame],
     tables: &Tables,
-) -> (Vec3, Vec3) {
-    let cell = pts.bl_cell[i];
-    if cell == NO_CELL {
-        let k = pts.bone[i] as usize;
-        let fk = &frames[k];
-        let (b, nb) = fk.shape.decode(pts.part[i], pts.s[i], pts.dir[i]);
-        let f = fk.shape.axial_fraction(pts.part[i], pts.s[i]);
-        let hs = fk.radius_ratio[0] + (fk.radius_ratio[1] - fk.radius_ratio[0]) * f;
-        let x = b + hs * pts.height[i] * nb;
-        return (fk.rot * x + fk.origin, fk.rot * pts.normal[i]);
+    out_p: &mut [Vec3],
+    out_n: &mut [Vec3],
+) {
+    out_p
+        .par_chunks_mut(CHUNK)
+        .zip(out_n.par_chunks_mut(CHUNK))
+        .enumerate()
+        .for_each(|(c, (ps, ns))| deform_block(c, pts, rigid, frames, tables, ps, ns));
+}
+
+/// One block: eight points at a time, each reading its four grid cells, then the
+/// detail-frame rotation and the composition in [`super::lanes`] vectors.
+fn deform_block(
+    c: usize,
+    pts: &PointData,
+    rigid: &Rigid,
+    frames: &[BoneFrame],
+    tables: &Tables,
+    out_p: &mut [Vec3],
+    out_n: &mut [Vec3],
+) {
+    let grid = &tables.grid[..];
+    let base = c * CHUNK;
+    let n = out_p.len();
+    let mut next_rigid = rigid
+        .block_start
+        .get(c)
+        .map_or(rigid.rec.len(), |&s| s as usize);
+    let (cells, uvs) = (&pts.bl_cell[base..base + n], &pts.bl_uv[base..base + n]);
+    let (hs_, res, nd) = (
+        &pts.bl_h[base..base + n],
+        &pts.bl_res[base..base + n],
+        &pts.bl_n[base..base + n],
+    );
+    let mut i = 0;
+    while i < n {
+        let m = (n - i).min(L);
+        let mut tc = [IDENTITY_CELL; L];
+        let (mut r, mut d) = (V3::default(), V3::default());
+        let mut any_rigid = false;
+        for l in 0..m {
+            let cell = cells[i + l];
+            let (rv, dv) = (res[i + l], nd[i + l]);
+            (r.x.0[l], r.y.0[l], r.z.0[l]) = (rv.x, rv.y, rv.z);
+            (d.x.0[l], d.y.0[l], d.z.0[l]) = (dv.x, dv.y, dv.z);
+            if cell == NO_CELL {
+                any_rigid = true;
+                continue;
+            }
+            tc[l] = grid_fetch(cell, uvs[i + l], grid).0;
+        }
+        let t: [[f32; L]; 11] = std::array::from_fn(|q| std::array::from_fn(|l| tc[l][q]));
+        let h = F8::load(&hs_[i..i + m]);
+        let (qx, qy, qz, qw) = (F8(t[6]), F8(t[7]), F8(t[8]), F8(t[9]));
+        let inv = 1.0 / (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
+        let (qx, qy, qz, qw) = (qx * inv, qy * inv, qz * inv, qw * inv);
+        let (cp, cn) = (
+            V3 {
+                x: F8(t[0]),
+                y: F8(t[1]),
+                z: F8(t[2]),
+            },
+            V3 {
+                x: F8(t[3]),
+                y: F8(t[4]),
+                z: F8(t[5]),
+            },
+        );
+        let q = [qx, qy, qz, qw];
+        let p = cp + (cn.scale(h) + rotate(q, r)).scale(F8(t[10]));
+        let nn = rotate(q, d);
+        for l in 0..m {
+            out_p[i + l] = p.lane(l);
+            out_n[i + l] = nn.lane(l);
+        }
+        if any_rigid {
+            for l in 0..m {
+                if cells[i + l] == NO_CELL {
+                    if let Some(rp) = rigid.rec.get(next_rigid) {
+                        (out_p[i + l], out_n[i + l]) = rigid_point(rp, frames);
+                    }
+                    next_rigid += 1;
+                }
+            }
+        }
+        i += m;
     }
-    let c = grid_fetch(cell, pts.bl_uv[i], &tables.grid);
-    let q = Quat::from_array(c.q).normalize();
-    (
-        c.p + c.hs * (pts.bl_h[i] * c.n + q * pts.bl_res[i]),
-        q * pts.bl_n[i],
-    )
 }

@@ -22,6 +22,7 @@
 
 use super::baseline;
 use super::frame::{self, BoneFrame};
+use super::heightfield;
 use super::surface::{BoneShape, CAP1, CAP2, CONE, encode};
 use crate::anatomy::{BoneKind, Skeleton};
 use crate::cloud::PointCloud;
@@ -98,6 +99,10 @@ pub struct Binding {
     pub(crate) points: PointData,
     /// Detail directions of the baseline grid at the fitted pose.
     pub(crate) fit_grid_normals: Vec<Vec3>,
+    /// Heightfield skinning's layout (derived from `points`, not saved).
+    pub(crate) hf: heightfield::Slots,
+    /// Baseline skinning's rigid points (derived from `points`, not saved).
+    pub(crate) bl_rigid: baseline::Rigid,
 }
 
 /// One point's binding, before splitting into arrays.
@@ -214,6 +219,8 @@ impl Binding {
         debug_assert_eq!(points.bone.len(), m);
         Ok(Binding {
             fitted: fitted.clone(),
+            hf: heightfield::Slots::new(&bones, &points),
+            bl_rigid: baseline::Rigid::new(&points),
             bones,
             points,
             fit_grid_normals,
@@ -226,6 +233,8 @@ impl Binding {
         let (bones, _, tables) = prepare(&fitted);
         Binding {
             fit_grid_normals: tables.grid_normals(),
+            hf: heightfield::Slots::new(&bones, &points),
+            bl_rigid: baseline::Rigid::new(&points),
             fitted,
             bones,
             points,

@@ -21,20 +21,30 @@
 //! | baseline skinning (ch. 4, Algorithm 3) — the default | [`baseline`] |
 //! | heightfield skinning with anisotropic bend + twist (ch. 3, Algorithm 2, eq. 3.1–3.3) | [`heightfield`] |
 //! | LBS and DQS with the weights of eq. 3.1, for comparison (fig. 3.5–3.8) | [`blend`] |
+//! | eight-lane `f32` vectors for the per-frame kernels | [`lanes`] |
 //! | saving and loading a binding (kiosk cache) | [`store`] |
 //!
 //! ## Per frame
 //!
 //! [`Binding::deform`] analyses the target once per bone (into a reusable [`Scratch`]), then
 //! runs over the points in parallel chunks, each point reading only its own arrays and its
-//! bones' frame data and writing its own output slot: no allocation once the scratch has grown,
-//! and the output does not depend on the thread count.
+//! bones' frame data and writing its own output slot: no allocation once the scratch (and, for
+//! heightfield skinning, each worker thread's block buffer) has grown, and the output does not
+//! depend on the thread count.
+//!
+//! Baseline and heightfield skinning tabulate per frame what depends only on the pose (the
+//! baseline grid; the bend grid of each joint side) so that the per-point work is a few table
+//! reads and a fixed sequence of arithmetic, done eight points at a time in [`lanes`] vectors;
+//! the per-point layouts they read are derived from the binding's arrays at bind and at load
+//! time and never saved (see each module's "Speed" notes). Measured with
+//! `pygmalion bench --only skin` (500k points, every joint bent, twisted and lengthened).
 
 pub mod baseline;
 pub mod binding;
 pub mod blend;
 pub mod frame;
 pub mod heightfield;
+pub mod lanes;
 pub mod store;
 pub mod surface;
 
@@ -112,7 +122,7 @@ pub struct Scratch {
     posed: Option<Posed>,
     frames: Vec<BoneFrame>,
     tables: baseline::Tables,
-    joint_bones: Vec<heightfield::JointBones>,
+    hf: heightfield::Tables,
 }
 
 impl Binding {
@@ -181,18 +191,49 @@ impl Binding {
                     Some(&self.fit_grid_normals),
                     &mut scratch.tables,
                 );
-                let tb = &scratch.tables;
-                run(op, on, |i| baseline::deform_point(i, pts, frames, tb))
+                baseline::deform(pts, &self.bl_rigid, frames, &scratch.tables, op, on);
             }
             Method::Heightfield => {
-                heightfield::prepare(bones, frames, &mut scratch.joint_bones);
-                let jb = &scratch.joint_bones;
-                run(op, on, |i| {
-                    heightfield::deform_point(i, pts, frames, bones, jb)
-                })
+                let t1 = std::time::Instant::now();
+                heightfield::build_tables(bones, frames, &self.hf, &mut scratch.hf);
+                if std::env::var_os("PYG_PHASES").is_some() {
+                    eprintln!("TMP hf tables {:?}", t1.elapsed());
+                }
+                heightfield::deform(&self.hf, &scratch.hf, op, on);
+                if std::env::var_os("PYG_REF").is_some() {
+                    let tb = &scratch.hf;
+                    run(op, on, |i| {
+                        heightfield::reference_point(i, pts, bones, frames, tb)
+                    });
+                }
             }
         }
         Ok(())
+    }
+
+    /// Heightfield skinning evaluated point by point with the bend iteration of Algorithm 2
+    /// (no bend tables, slow): the reference that [`Method::Heightfield`]'s tables approximate
+    /// (see [`heightfield`]), for tests. Same errors as [`Binding::deform`].
+    pub fn deform_heightfield_reference(&self, target: &Skeleton) -> Result<PointCloud> {
+        let mut pos = vec![Vec3::ZERO; self.len()];
+        let mut nrm = vec![Vec3::ZERO; self.len()];
+        let mut scratch = Scratch::default();
+        self.deform(
+            target,
+            Method::Heightfield,
+            &mut scratch,
+            &mut pos,
+            &mut nrm,
+        )?;
+        let (pts, bones, frames, tb) = (&self.points, &self.bones, &scratch.frames, &scratch.hf);
+        let fast = pos.clone();
+        run(&mut pos, &mut nrm, |i| {
+            heightfield::reference_point(i, pts, bones, frames, tb)
+        });
+        if std::env::var_os("PYG_DBG").is_some() {
+            heightfield::debug_worst(pts, &self.hf, bones, frames, tb, &fast, &pos);
+        }
+        Ok(PointCloud::with_normals(pos, nrm))
     }
 
     /// Convenience: [`Binding::deform`] into a new cloud (colours are the caller's to copy).
