@@ -305,13 +305,22 @@ fn registration_steps_of_any_budget_give_the_same_bytes() {
         .unwrap()
         .run_to_convergence()
         .unwrap();
-    for budget_us in [300u64, 5_000] {
+    for budget_us in [0u64, 300, 5_000] {
         let mut reg = Registration::new(cloud.clone(), t.clone(), opts.clone()).unwrap();
         let mut steps = 0;
         let mut last_units = 0;
         while !reg.is_done() {
             let p = reg.step(Duration::from_micros(budget_us));
             assert!(p.units >= last_units, "progress goes forward");
+            if budget_us == 0 && !p.done {
+                // A step stops at the first unit boundary after its budget: with no budget,
+                // exactly one unit (the kiosk's frames overshoot by at most one unit).
+                assert_eq!(
+                    p.units,
+                    last_units + 1,
+                    "a zero budget ran more than one unit"
+                );
+            }
             last_units = p.units;
             steps += 1;
         }

@@ -104,20 +104,25 @@ fn a_statue_loads_fits_within_budget_binds_animates_and_is_cached() {
     });
     let work = *a.world().resource::<FitWork>();
     println!(
-        "registration: {} frames, budget {} ms, largest frame {:.2} ms, {} skeleton states seen",
+        "registration: {} frames, {} units (at most {} in a frame), budget {} ms, largest frame {:.2} ms, {} skeleton states seen",
         work.frames,
+        work.units,
+        work.max_units,
         work.budget_ms,
         work.max_ms,
         poses.len()
     );
+    // The frame times themselves are measured by `pygmalion bench` (fakir/unit_100k): under
+    // the test runner other tests share the two cores, so a wall-clock bound here would only
+    // measure the neighbours. What is asserted is that the fit was cut into frames.
     assert!(work.frames > 10, "the fit ran over many frames");
-    assert!(poses.len() > 5, "the skeleton was seen settling in");
-    // A unit is never interrupted: a frame overshoots its budget by at most one work unit.
     assert!(
-        work.max_ms <= work.budget_ms + 40.0,
-        "a frame spent {} ms on registration",
-        work.max_ms
+        work.max_units * 10 < work.units,
+        "one frame ran {} of the {} work units",
+        work.max_units,
+        work.units
     );
+    assert!(poses.len() > 5, "the skeleton was seen settling in");
 
     // Animate to a preset pose.
     let before = {

@@ -35,6 +35,10 @@ pub struct FitWork {
     pub max_ms: f32,
     /// Frames that did registration work.
     pub frames: u64,
+    /// Work units of all frames so far.
+    pub units: u64,
+    /// Most work units one frame ran.
+    pub max_units: u64,
 }
 
 impl Plugin for FittingPlugin {
@@ -102,11 +106,15 @@ fn step_fitting(
             continue;
         };
         let start = Instant::now();
+        let units_before = reg.progress().units;
         let progress = reg.step(budget);
         let ms = start.elapsed().as_secs_f32() * 1000.0;
         work.last_ms = ms;
         work.max_ms = work.max_ms.max(ms);
         work.frames += 1;
+        let units = progress.units.saturating_sub(units_before);
+        work.units += units;
+        work.max_units = work.max_units.max(units);
         if let Some(s) = progress.skeleton {
             match pose {
                 Some(mut p) => p.0 = s,

@@ -68,7 +68,7 @@
 
 use super::binding::{BoneBind, PointData};
 use super::frame::BoneFrame;
-use super::lanes::{F8, L, V3};
+use super::lanes::{F8, L, V3, has_avx2};
 use super::surface::{CAP1, CAP2};
 use crate::geometry::frames::rotation_arc;
 use crate::math::{Mat3, Quat, Vec3};
@@ -797,11 +797,34 @@ pub fn deform(
         .par_chunks_mut(CHUNK)
         .zip(out_n.par_chunks_mut(CHUNK))
         .enumerate()
-        .for_each(|(c, (ps, ns))| deform_block(c, pts, rigid, frames, tables, ps, ns));
+        .for_each(|(c, (ps, ns))| {
+            #[cfg(target_arch = "x86_64")]
+            if has_avx2() {
+                // SAFETY: the processor runs AVX2.
+                return unsafe { deform_block_avx2(c, pts, rigid, frames, tables, ps, ns) };
+            }
+            deform_block(c, pts, rigid, frames, tables, ps, ns)
+        });
+}
+
+/// [`deform_block`] compiled for AVX2 (same results, see [`super::lanes::has_avx2`]).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn deform_block_avx2(
+    c: usize,
+    pts: &PointData,
+    rigid: &Rigid,
+    frames: &[BoneFrame],
+    tables: &Tables,
+    out_p: &mut [Vec3],
+    out_n: &mut [Vec3],
+) {
+    deform_block(c, pts, rigid, frames, tables, out_p, out_n)
 }
 
 /// One block: eight points at a time, each reading its four grid cells, then the
 /// detail-frame rotation and the composition in [`super::lanes`] vectors.
+#[inline(always)]
 fn deform_block(
     c: usize,
     pts: &PointData,
