@@ -309,9 +309,16 @@ fn registration_steps_of_any_budget_give_the_same_bytes() {
         let mut reg = Registration::new(cloud.clone(), t.clone(), opts.clone()).unwrap();
         let mut steps = 0;
         let mut last_units = 0;
+        let mut last_fraction = 0.0f32;
         while !reg.is_done() {
             let p = reg.step(Duration::from_micros(budget_us));
             assert!(p.units >= last_units, "progress goes forward");
+            assert!(
+                p.activity.fraction >= last_fraction && p.activity.fraction <= 1.0,
+                "the progress fraction goes forward: {last_fraction} then {}",
+                p.activity.fraction
+            );
+            last_fraction = p.activity.fraction;
             if budget_us == 0 && !p.done {
                 // A step stops at the first unit boundary after its budget: with no budget,
                 // exactly one unit (the kiosk's frames overshoot by at most one unit).
@@ -324,6 +331,12 @@ fn registration_steps_of_any_budget_give_the_same_bytes() {
             last_units = p.units;
             steps += 1;
         }
+        assert_eq!(
+            reg.progress().activity.fraction,
+            1.0,
+            "done is the whole way"
+        );
+        assert!(last_fraction > 0.0);
         let fit = reg.take_result().unwrap().unwrap();
         assert!(steps > 1, "a {budget_us} µs budget must take several steps");
         assert_eq!(fit.labels, reference.labels);

@@ -80,6 +80,9 @@ impl Default for RegistrationOptions {
 /// Progress of a registration.
 #[derive(Clone, Debug, Default)]
 pub struct Progress {
+    /// What runs now; `activity.fraction` estimates the share done (0.15 for the candidates'
+    /// short registrations, up to 0.85 for the finalists, the rest for level 1; each part
+    /// advances with its whole-skeleton iterations and chains), never decreasing.
     pub activity: Activity,
     /// Work units done so far.
     pub units: u64,
@@ -164,6 +167,17 @@ fn subsample(n: usize, k: usize, seed: u64) -> Vec<u32> {
     out
 }
 
+/// Share of the progress fraction given to the candidates' short registrations.
+const INIT_SHARE: f32 = 0.15;
+/// Where level 0 (the finalists) ends and level 1 begins, when there is a level 1.
+const LEVEL0_END: f32 = 0.85;
+
+/// Part `i` of `count` equal parts of `[a, b]`.
+fn span(a: f32, b: f32, i: usize, count: usize) -> (f32, f32) {
+    let w = (b - a) / count.max(1) as f32;
+    (a + w * i as f32, a + w * (i + 1) as f32)
+}
+
 fn assignment_of(
     positions: &[Vec3],
     normals: &[Vec3],
@@ -216,6 +230,10 @@ pub fn register(
     let free_root = template.block_bones().next().is_none();
     let mut distances = Vec::new();
     let mut chosen = 0;
+    // The progress fraction (`Activity::fraction`): candidates, finalists and level 1 share it.
+    let mut fraction = 0.0f32;
+    let finalists_start = if cands.len() > 1 { INIT_SHARE } else { 0.0 };
+    let level1_start = if level0.len() < n { LEVEL0_END } else { 1.0 };
     if cands.len() > 1 {
         let idx = subsample(n, opts.init_subsample, opts.seed ^ 0x9e37);
         let quick = ScheduleSettings {
@@ -229,7 +247,7 @@ pub fn register(
             two_bone_rounds: 1,
             ..opts.solver.clone()
         };
-        for c in &cands {
+        for (i, c) in cands.iter().enumerate() {
             let a = assignment_of(positions, &normals, &idx, nb, params);
             let mut s = Solver::new(
                 WorldSkeleton::from_skeleton(&c.skeleton),
@@ -240,7 +258,10 @@ pub fn register(
             );
             s.free_root = free_root;
             s.activity.phase = "initialisation";
+            s.activity.fraction = fraction;
+            s.activity.span = span(0.0, INIT_SHARE, i, cands.len());
             register_skeleton(&mut s, &quick, true).map_err(cancelled)?;
+            fraction = s.activity.fraction;
             distances.push(s.mean_distance() + s.occupancy());
         }
         for (i, d) in distances.iter().enumerate() {
@@ -261,7 +282,7 @@ pub fn register(
     });
     order.truncate(opts.finalists.max(1));
     let mut finals: Vec<(f64, f64, usize, WorldSkeleton, u64, usize)> = Vec::new();
-    for &ci in &order {
+    for (j, &ci) in order.iter().enumerate() {
         let c = &cands[ci];
         let a0 = assignment_of(positions, &normals, &level0, nb, params);
         let mut s = Solver::new(
@@ -272,7 +293,10 @@ pub fn register(
             pause,
         );
         s.free_root = free_root;
+        s.activity.fraction = fraction;
+        s.activity.span = span(finalists_start, level1_start, j, order.len());
         let iterations = register_skeleton(&mut s, &opts.schedule, true).map_err(cancelled)?;
+        fraction = s.activity.fraction;
         let score = s.mean_distance() + s.occupancy();
         let implausible = super::init::implausibility(&s.world.to_skeleton());
         finals.push((score, implausible, ci, s.world.clone(), s.units, iterations));
@@ -293,6 +317,8 @@ pub fn register(
     let mut s = Solver::new(world, a0, start.scale, opts.solver.clone(), pause);
     s.free_root = free_root;
     s.units = units0;
+    s.activity.fraction = fraction;
+    s.activity.span = (level1_start, 1.0);
     s.refresh().map_err(cancelled)?;
     // Level 1: all points.
     if level0.len() < n {
@@ -307,6 +333,7 @@ pub fn register(
     }
     s.refresh().map_err(cancelled)?;
     s.activity.phase = "done";
+    s.activity.fraction = 1.0;
     let mut labels = vec![0u32; n];
     for (k, &src) in s.assignment.source.iter().enumerate() {
         labels[src as usize] = s.assignment.label[k];
@@ -450,6 +477,7 @@ impl Registration {
                 p.skeleton = Some(fit.skeleton.clone());
                 p.mean_distance = fit.mean_distance;
                 p.activity.phase = "done";
+                p.activity.fraction = 1.0;
             }
         }
         if let Some((_, _, h)) = self.worker.take() {

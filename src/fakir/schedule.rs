@@ -211,11 +211,14 @@ pub fn register_skeleton(
         }
         before = s.mean_distance();
     }
+    let (iterations_max, chains) = (settings.max_iterations.max(1), t.chains.len().max(1));
     for it in 0..settings.max_iterations {
         s.activity.iteration = it;
         for (ci, chain) in t.chains.iter().enumerate() {
             s.activity.phase = "chain";
             s.activity.chain = Some(chain.name.clone());
+            s.activity
+                .advance((it as f32 + ci as f32 / chains as f32) / iterations_max as f32);
             if it == 0 && fresh {
                 chain_initial_pass(s, &chain.bones)?;
             }
@@ -227,11 +230,13 @@ pub fn register_skeleton(
         s.activity.chain = None;
         s.block()?;
         iterations += 1;
+        s.activity.advance((it + 1) as f32 / iterations_max as f32);
         let after = s.mean_distance();
         if before - after <= settings.skeleton_tolerance * before.max(1e-30) {
             break;
         }
         before = after;
     }
+    s.activity.advance(1.0);
     Ok(iterations)
 }

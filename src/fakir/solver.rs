@@ -36,6 +36,23 @@ pub struct Activity {
     pub pass: usize,
     /// Resolution level (0 = subsample, 1 = all points).
     pub level: usize,
+    /// Estimated share of the whole registration done, in `[0, 1]`, never decreasing (see
+    /// [`Activity::span`]).
+    pub fraction: f32,
+    /// The share of the registration the running schedule covers: `fraction` goes from
+    /// `span.0` to `span.1` as its whole-skeleton iterations and chains advance.
+    pub span: (f32, f32),
+}
+
+impl Activity {
+    /// Sets `fraction` to the point `t ∈ [0, 1]` of the current span (never backwards).
+    pub fn advance(&mut self, t: f32) {
+        let (a, b) = self.span;
+        let f = a + (b - a) * t.clamp(0.0, 1.0);
+        if f > self.fraction {
+            self.fraction = f.min(1.0);
+        }
+    }
 }
 
 /// Called after every work unit; returning `Err(Cancelled)` stops the registration.
