@@ -640,3 +640,249 @@ fn hole_filling_closes_gaps_between_splats() {
     assert!(open > 0.03, "holes without filling: {open}");
     assert!(filled < 0.2 * open, "filled {filled}, open {open}");
 }
+
+// ------------------------------------------------------------------------------------------
+// Pose pictograms
+// ------------------------------------------------------------------------------------------
+
+mod pictograms {
+    use pygmalion::anatomy::{Pose, Skeleton, Template};
+    use pygmalion::math::{Quat, Vec3};
+    use pygmalion::render::Image;
+    use pygmalion::render::pictogram::{
+        Pictogram, PictogramOptions, pictogram, pose_pictogram, standing_height,
+    };
+    use std::sync::Arc;
+
+    use crate::common::scratch;
+
+    /// The built-in poses of `config/poses/`.
+    const POSES: [&str; 7] = [
+        "rest",
+        "contrapposto",
+        "arms_raised",
+        "walking",
+        "seated",
+        "thinker",
+        "greeting",
+    ];
+
+    fn human() -> Arc<Template> {
+        Arc::new(Template::builtin("human").unwrap())
+    }
+
+    /// The pictogram of a built-in pose and the skeleton it shows.
+    fn draw(name: &str, o: &PictogramOptions) -> (Pictogram, Skeleton) {
+        let pose = Pose::builtin(name).unwrap();
+        let skel = pose
+            .apply(&Skeleton::rest(human()), &Pose::source_path(name))
+            .unwrap();
+        (pose_pictogram(&pose, human(), o).unwrap(), skel)
+    }
+
+    /// Pixels at least half covered.
+    fn ink(p: &Pictogram) -> usize {
+        p.rgba.chunks_exact(4).filter(|c| c[3] >= 128).count()
+    }
+
+    /// Pixels whose coverage differs by more than a quarter.
+    fn differing(a: &Pictogram, b: &Pictogram) -> usize {
+        a.rgba
+            .chunks_exact(4)
+            .zip(b.rgba.chunks_exact(4))
+            .filter(|(x, y)| x[3].abs_diff(y[3]) > 64)
+            .count()
+    }
+
+    /// The pixel row of the top of the head (the head bone's far sphere).
+    fn head_top_row(p: &Pictogram, s: &Skeleton) -> f32 {
+        let head = s.template.bone_index("head").unwrap();
+        let b = s.pose().bones[head];
+        let top = s.root_rotation.inverse() * (b.c2 - s.root_position);
+        p.frame.to_pixel(top).y - b.r2 * 0.8 * p.frame.scale
+    }
+
+    #[test]
+    fn every_built_in_pose_gets_a_distinct_pictogram() {
+        let o = PictogramOptions::default();
+        let start = std::time::Instant::now();
+        let all: Vec<(Pictogram, Skeleton)> = POSES.iter().map(|n| draw(n, &o)).collect();
+        println!(
+            "{} pictograms in {:.1} ms",
+            all.len(),
+            start.elapsed().as_secs_f64() * 1e3
+        );
+        // A strip of them, for people to look at.
+        let strip: Vec<Image> = all.iter().map(|(p, _)| p.to_image([51, 56, 71])).collect();
+        Image::hstack(&strip, 4, [0, 0, 0])
+            .save_png(scratch("render_pictograms").join("poses.png"))
+            .unwrap();
+        let n = (o.width * o.height) as usize;
+        for (name, (p, _)) in POSES.iter().zip(&all) {
+            let (x0, y0, x1, y1) = p.ink_bounds(128).expect("not empty");
+            println!(
+                "{name}: {} pixels of ink, {}x{} pixels",
+                ink(p),
+                x1 - x0 + 1,
+                y1 - y0 + 1
+            );
+            assert_eq!((p.width, p.height, p.rgba.len()), (64, 64, n * 4));
+            // A figure, not a blob or a speck: 5–30% of the picture, inside the margins,
+            // standing on the bottom margin; a transparent background and antialiased edges.
+            assert!(
+                ink(p) * 20 > n && ink(p) * 10 < 3 * n,
+                "{name}: ink {}",
+                ink(p)
+            );
+            assert!(
+                x0 >= 2 && y0 >= 2 && x1 <= 61 && y1 <= 61,
+                "{name}: {x0},{y0}–{x1},{y1}"
+            );
+            assert!(
+                y1 >= 60,
+                "{name} does not stand on the ground (lowest row {y1})"
+            );
+            assert_eq!(p.alpha(0, 0), 0);
+            let partial = p.rgba.chunks_exact(4).filter(|c| c[3] > 0 && c[3] < 255);
+            assert!(partial.count() > 20, "{name}: no antialiasing");
+        }
+        // Different poses, different pictures (the closest pair, greeting and rest, differs in
+        // about a hundred pixels).
+        let mut closest = (usize::MAX, "", "");
+        for i in 0..all.len() {
+            for j in 0..i {
+                let d = differing(&all[i].0, &all[j].0);
+                closest = closest.min((d, POSES[i], POSES[j]));
+            }
+        }
+        println!(
+            "closest pair: {} and {}, {} pixels differ",
+            closest.1, closest.2, closest.0
+        );
+        assert!(closest.0 >= 15, "{closest:?}");
+    }
+
+    #[test]
+    fn pictograms_measure_the_pose() {
+        let o = PictogramOptions::default();
+        let (rest, rest_s) = draw("rest", &o);
+        let (raised, raised_s) = draw("arms_raised", &o);
+        let (seated, _) = draw("seated", &o);
+        let (thinker, _) = draw("thinker", &o);
+        // One scale for every pose of a skeleton.
+        assert_eq!(rest.frame.scale, raised.frame.scale);
+        assert_eq!(rest.frame.scale, seated.frame.scale);
+        // Standing, nothing rises above the head; arms raised, the hands do.
+        let above = |p: &Pictogram, row: f32| {
+            (0..p.height)
+                .filter(|&y| (y as f32) < row - 1.0)
+                .flat_map(|y| (0..p.width).map(move |x| (x, y)))
+                .filter(|&(x, y)| p.alpha(x, y) >= 128)
+                .count()
+        };
+        let rest_above = above(&rest, head_top_row(&rest, &rest_s));
+        let raised_above = above(&raised, head_top_row(&raised, &raised_s));
+        println!("ink above the head: rest {rest_above}, arms raised {raised_above} pixels");
+        assert_eq!(rest_above, 0);
+        assert!(raised_above >= 30, "{raised_above} pixels above the head");
+        // Seated (and the Thinker, bent forward) is shorter than standing.
+        let height = |p: &Pictogram| {
+            let (_, y0, _, y1) = p.ink_bounds(128).unwrap();
+            (y1 - y0 + 1) as f32
+        };
+        println!(
+            "heights: rest {}, arms raised {}, seated {}, thinker {} pixels",
+            height(&rest),
+            height(&raised),
+            height(&seated),
+            height(&thinker)
+        );
+        assert!(height(&seated) < 0.85 * height(&rest));
+        assert!(height(&thinker) < height(&seated));
+        assert!(height(&raised) > 1.15 * height(&rest));
+        // The standing figure is 1 / frame_heights of the usable height (60 pixels).
+        let want = 60.0 / o.frame_heights;
+        assert!(
+            (height(&rest) - want).abs() <= 2.0,
+            "rest {} vs {want}",
+            height(&rest)
+        );
+    }
+
+    #[test]
+    fn pictogram_ignores_where_the_statue_stands_and_its_size() {
+        // A skeleton placed, turned and scaled like a fitted scan draws like the template's.
+        let o = PictogramOptions::default();
+        let pose = Pose::builtin("walking").unwrap();
+        let src = Pose::source_path("walking");
+        let placed = Skeleton::rest_placed(
+            human(),
+            Vec3::new(3.0, -1.0, 2.0),
+            Quat::from_rotation_y(2.0) * Quat::from_rotation_x(0.4),
+            170.0,
+        );
+        let a = pictogram(&pose.apply(&placed, &src).unwrap(), &o);
+        let (b, _) = draw("walking", &o);
+        assert!(
+            (standing_height(&placed) / standing_height(&Skeleton::rest(human())) - 170.0).abs()
+                < 0.01
+        );
+        assert!(
+            differing(&a, &b) <= 2,
+            "{} pixels differ",
+            differing(&a, &b)
+        );
+        // The view turns the figure: from the front and from the side differ.
+        let side = PictogramOptions {
+            yaw_deg: -90.0,
+            ..o
+        };
+        let front = PictogramOptions { yaw_deg: 0.0, ..o };
+        let (s, _) = draw("walking", &side);
+        let (f, _) = draw("walking", &front);
+        assert!(differing(&s, &f) > 40);
+        // Seen from the side the stride shows: the feet (the lowest eighth of the figure) lie
+        // farther apart than seen from the front.
+        let feet = |p: &Pictogram| {
+            let (_, y0, _, y1) = p.ink_bounds(128).unwrap();
+            let from = y1 - (y1 - y0) / 8;
+            let xs: Vec<u32> = (from..=y1)
+                .flat_map(|y| (0..p.width).map(move |x| (x, y)))
+                .filter(|&(x, y)| p.alpha(x, y) >= 128)
+                .map(|(x, _)| x)
+                .collect();
+            xs.iter().max().unwrap() - xs.iter().min().unwrap() + 1
+        };
+        println!(
+            "walking: feet {} pixels apart from the side, {} from the front",
+            feet(&s),
+            feet(&f)
+        );
+        assert!(feet(&s) > feet(&f) + 4);
+    }
+
+    #[test]
+    fn a_pose_that_does_not_fit_the_template_is_refused() {
+        let mut pose = Pose::builtin("arms_raised").unwrap();
+        pose.bones.insert("l_wing".into(), Default::default());
+        let err = pose_pictogram(&pose, human(), &PictogramOptions::default()).unwrap_err();
+        assert!(err.to_string().contains("l_wing"), "{err}");
+        // A pose of another template's bones.
+        let quadruped = Arc::new(Template::builtin("quadruped").unwrap());
+        let err = pose_pictogram(
+            &Pose::builtin("thinker").unwrap(),
+            quadruped,
+            &PictogramOptions::default(),
+        );
+        assert!(err.is_err());
+        // Degenerate sizes do not panic.
+        let tiny = PictogramOptions {
+            width: 1,
+            height: 1,
+            margin_px: 5.0,
+            ..PictogramOptions::default()
+        };
+        let (p, _) = draw("rest", &tiny);
+        assert_eq!(p.rgba.len(), 4);
+    }
+}

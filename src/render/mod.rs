@@ -74,13 +74,19 @@
 //!   diagnostic pictures.
 //! * Pictures are PNG files written by the tiny encoder of [`png`] (stored deflate blocks; no
 //!   dependency).
+//!
+//! [`pictogram`] draws a different kind of picture: a small RGBA icon of a skeleton's
+//! sphere-mesh figure in a pose (the kiosk's pose buttons), analytically from the bones rather
+//! than from points.
 
 pub mod camera;
 pub mod image;
+pub mod pictogram;
 pub mod png;
 
 pub use camera::Camera;
 pub use image::Image;
+pub use pictogram::{Pictogram, PictogramOptions, pictogram, pose_pictogram};
 
 use rayon::prelude::*;
 
