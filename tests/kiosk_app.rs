@@ -8,6 +8,7 @@ use pygmalion::anatomy::Template;
 use pygmalion::cloud::ply::{WriteOptions, write_ply};
 use pygmalion::kiosk::config::{KioskConfig, StatueEntry};
 use pygmalion::kiosk::fitting::FitWork;
+use pygmalion::kiosk::ui::{fitting_percent, progress_fraction};
 use pygmalion::kiosk::{
     CurrentPose, KioskPlugin, PoseRequested, SkinnedPoints, StatueCloud, StatueState,
 };
@@ -92,6 +93,8 @@ fn a_statue_loads_fits_within_budget_binds_animates_and_is_cached() {
     a.update();
     assert!(t0.elapsed() < Duration::from_millis(500));
     let mut poses = Vec::new();
+    // The percentage a visitor reads on the status line, frame after frame.
+    let mut shown: Vec<u32> = Vec::new();
     run_until(&mut a, Duration::from_secs(240), |w| {
         let mut q = w.query::<&CurrentPose>();
         if let Some(p) = q.iter(w).next() {
@@ -100,8 +103,32 @@ fn a_statue_loads_fits_within_budget_binds_animates_and_is_cached() {
                 poses.push(j);
             }
         }
+        let mut q = w.query::<&StatueState>();
+        if let Some(f) = q.iter(w).next().and_then(progress_fraction) {
+            shown.push(fitting_percent(f));
+        }
         state(w).is_some_and(|s| s == "Ready")
     });
+    // The fitting percentage starts near 0, never goes back, moves in many steps, and reads
+    // 100 once the fit is done (while the binding is built).
+    let distinct = {
+        let mut d = shown.clone();
+        d.dedup();
+        d.len()
+    };
+    println!(
+        "fitting percentage over {} frames: first {:?}, last {:?}, {distinct} distinct values",
+        shown.len(),
+        shown.first(),
+        shown.last()
+    );
+    assert!(shown.first().is_some_and(|&p| p <= 5), "{shown:?}");
+    assert!(
+        shown.windows(2).all(|w| w[0] <= w[1]),
+        "went back: {shown:?}"
+    );
+    assert_eq!(shown.last(), Some(&100));
+    assert!(distinct >= 20, "{distinct} distinct percentages: {shown:?}");
     let work = *a.world().resource::<FitWork>();
     println!(
         "registration: {} frames, {} units (at most {} in a frame), budget {} ms, largest frame {:.2} ms, {} skeleton states seen",

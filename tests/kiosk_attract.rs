@@ -4,14 +4,20 @@
 use bevy::input::InputPlugin;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
+use pygmalion::anatomy::{Pose, Template};
 use pygmalion::kiosk::attract::{AttractConfig, AttractPlugin, IdleState, attract_cycle};
 use pygmalion::kiosk::config::KioskConfig;
-use pygmalion::kiosk::ui::{OperatorPanel, UiAction, UiPart, UiPlugin, ascii_fallback};
+use pygmalion::kiosk::ui::{
+    OperatorPanel, POSE_ICON_PX, PoseIcon, UiAction, UiPart, UiPlugin, ascii_fallback,
+};
 use pygmalion::kiosk::{
     ActiveStatue, Interaction, KioskPlugin, KioskSet, OrbitCamera, PoseRequested, ResetRequested,
-    Selection, Settings, Statue, StatueState,
+    Selection, Settings, Statue, StatueCloud, StatueState,
 };
+use pygmalion::synth::{SynthOptions, generate};
+use std::collections::HashMap;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Duration;
 
 const STEP: f32 = 0.1;
@@ -198,6 +204,50 @@ fn any_interaction_returns_to_active_without_a_reset() {
     assert!(app.world().resource::<Log>().resets.is_empty());
 }
 
+/// The width of the progress bar's fill.
+fn fill_width(app: &mut App) -> Val {
+    let mut q = app.world_mut().query::<(&UiPart, &Node)>();
+    let w: Vec<Val> = q
+        .iter(app.world())
+        .filter(|(p, _)| **p == UiPart::ProgressFill)
+        .map(|(_, n)| n.width)
+        .collect();
+    assert_eq!(w.len(), 1);
+    w[0]
+}
+
+/// Each pose button's pictogram: pose name → ((width, height), RGBA bytes).
+fn pose_pictures(app: &mut App) -> HashMap<String, ((u32, u32), Vec<u8>)> {
+    let mut q = app.world_mut().query::<(&PoseIcon, &ImageNode)>();
+    let handles: Vec<(String, Handle<Image>)> = q
+        .iter(app.world())
+        .map(|(p, n)| (p.0.clone(), n.image.clone()))
+        .collect();
+    let images = app.world().resource::<Assets<Image>>();
+    handles
+        .into_iter()
+        .map(|(pose, h)| {
+            let img = images
+                .get(&h)
+                .unwrap_or_else(|| panic!("{pose}: no picture"));
+            let size = (img.width(), img.height());
+            (pose, (size, img.data.clone().expect("pixels on the CPU")))
+        })
+        .collect()
+}
+
+/// The rest figure as the kiosk draws it.
+fn rest_figure() -> Vec<u8> {
+    let human = Arc::new(Template::builtin("human").unwrap());
+    pygmalion::render::pose_pictogram(
+        &Pose::builtin("rest").unwrap(),
+        human,
+        &pygmalion::kiosk::ui::pose_icon_options(),
+    )
+    .unwrap()
+    .rgba
+}
+
 fn texts_of(app: &mut App, part: UiPart) -> Vec<String> {
     let mut q = app.world_mut().query::<(&UiPart, &Text)>();
     q.iter(app.world())
@@ -228,6 +278,8 @@ fn ui_shows_the_countdown_status_and_error_card() {
             index: 1,
             entity: None,
         })
+        // Image assets (no asset plugin here) for the pose pictograms.
+        .init_resource::<Assets<Image>>()
         .add_plugins(UiPlugin { headless: false });
     });
     let statue = app
@@ -237,7 +289,10 @@ fn ui_shows_the_countdown_status_and_error_card() {
                 index: 1,
                 title: titles[1].clone(),
             },
-            StatueState::Fitting { units: 17 },
+            StatueState::Fitting {
+                units: 17,
+                fraction: 0.4271,
+            },
         ))
         .id();
     app.world_mut().resource_mut::<ActiveStatue>().entity = Some(statue);
@@ -251,10 +306,59 @@ fn ui_shows_the_countdown_status_and_error_card() {
         .collect();
     assert_eq!(pose_buttons.len(), poses.len());
     assert_eq!(texts_of(&mut app, UiPart::StatueTitle), [titles[1].clone()]);
-    let status = texts_of(&mut app, UiPart::Status);
-    // No font assets headless: the built-in font, with its ASCII fallback.
-    assert_eq!(status, [ascii_fallback(&format!("{} · 17", texts.fitting))]);
+    let status = texts_of(&mut app, UiPart::StatusText);
+    // No font assets headless: the built-in font, with its ASCII fallback. The share done as
+    // a percentage (rounded down), not the work units, and the bar filled as much.
+    assert_eq!(status, [ascii_fallback(&format!("{} 42%", texts.fitting))]);
     assert!(visible(&mut app, UiPart::Status));
+    assert!(visible(&mut app, UiPart::ProgressTrack));
+    assert_eq!(fill_width(&mut app), Val::Percent(42.0));
+    // Every pose button has its pictogram: an image of the pictogram's size with the figure
+    // on a transparent background, a different one per pose.
+    let pictures = pose_pictures(&mut app);
+    assert_eq!(pictures.len(), poses.len());
+    for (pose, (size, rgba)) in &pictures {
+        assert_eq!(*size, POSE_ICON_PX, "{pose}");
+        let ink = rgba.chunks_exact(4).filter(|p| p[3] > 128).count();
+        let clear = rgba.chunks_exact(4).filter(|p| p[3] == 0).count();
+        let n = rgba.len() / 4;
+        assert!(
+            ink * 20 > n && clear * 2 > n,
+            "{pose}: ink {ink}, clear {clear} of {n}"
+        );
+    }
+    for (a, pa) in &pictures {
+        for (b, pb) in &pictures {
+            assert!(a == b || pa.1 != pb.1, "{a} and {b} look the same");
+        }
+    }
+    // "Original" shows the rest figure until the statue is loaded, then the statue itself
+    // (its cloud from the front).
+    assert_eq!(pictures["identity"].1, rest_figure());
+    let human = Arc::new(Template::builtin("human").unwrap());
+    let synth = generate(
+        human,
+        &SynthOptions {
+            points: 4000,
+            seed: 3,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    app.world_mut()
+        .entity_mut(statue)
+        .insert(StatueCloud(Arc::new(synth.cloud)));
+    app.update();
+    let original = pose_pictures(&mut app)["identity"].1.clone();
+    let ink = original.chunks_exact(4).filter(|p| p[3] > 0).count();
+    assert!(
+        ink * 20 > original.len() / 4,
+        "the statue's picture is empty"
+    );
+    assert_ne!(original, pictures["identity"].1);
+    // The other buttons keep their pictograms.
+    assert_eq!(pose_pictures(&mut app)["walking"], pictures["walking"]);
+
     assert!(!visible(&mut app, UiPart::ErrorCard));
     assert!(!visible(&mut app, UiPart::StillThere));
     assert!(!visible(&mut app, UiPart::OperatorPanel));

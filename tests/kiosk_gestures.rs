@@ -19,8 +19,8 @@ use pygmalion::kiosk::gestures::{
 };
 use pygmalion::kiosk::ik;
 use pygmalion::kiosk::ui::{
-    OperatorPanel, UiAction, UiPlugin, ascii_fallback, carousel_step, friendly_pose_name,
-    status_text,
+    OperatorPanel, UiAction, UiPlugin, ascii_fallback, carousel_step, fitting_percent,
+    friendly_pose_name, progress_fraction, status_text,
 };
 use pygmalion::kiosk::{
     ActiveStatue, CurrentPose, FittedSkeleton, Interaction, KioskSet, OrbitCamera, PoseAnimation,
@@ -346,6 +346,71 @@ fn mouse_emulates_touch_wheel_zooms_right_drag_pans() {
 }
 
 #[test]
+fn the_statue_is_framed_between_the_top_bar_and_the_status_line() {
+    use pygmalion::cloud::PointCloud;
+    use pygmalion::kiosk::SceneMargins;
+    use pygmalion::kiosk::statue::{SCENE_FILL, frame_camera};
+    // A statue-shaped box of points (1.6 tall on a plinth, 0.6 wide and deep), off the origin.
+    let mut positions = Vec::new();
+    for i in 0..=20 {
+        for j in 0..=20 {
+            for k in 0..=20 {
+                let f = |n: i32| n as f32 / 20.0;
+                positions.push(Vec3::new(
+                    2.0 + 0.6 * f(i),
+                    -0.3 + 1.6 * f(j),
+                    5.0 + 0.6 * f(k),
+                ));
+            }
+        }
+    }
+    let cloud = PointCloud {
+        positions,
+        ..Default::default()
+    };
+    for (screen, margins) in [
+        (SIZE, SceneMargins::default()),
+        (Vec2::new(1920.0, 1080.0), SceneMargins::default()),
+        (
+            SIZE,
+            SceneMargins {
+                top: 100.0,
+                bottom: 300.0,
+            },
+        ),
+    ] {
+        let mut orbit = OrbitCamera::default();
+        frame_camera(&mut orbit, &cloud, screen, margins);
+        let view = View::from_orbit(&orbit, screen, FOV_Y);
+        let ys: Vec<f32> = cloud
+            .positions
+            .iter()
+            .map(|&p| view.project(p).unwrap().y)
+            .collect();
+        let (lo, hi) = ys
+            .iter()
+            .fold((f32::MAX, f32::MIN), |(l, h), &y| (l.min(y), h.max(y)));
+        let band = (margins.top, screen.y - margins.bottom);
+        println!(
+            "{screen}: statue {lo:.0}..{hi:.0} px, free band {:.0}..{:.0}",
+            band.0, band.1
+        );
+        // Inside the free band (the hint and the strip never cover it), filling most of it.
+        assert!(lo >= band.0 && hi <= band.1, "{lo}..{hi} outside {band:?}");
+        assert!(
+            hi - lo > 0.85 * SCENE_FILL * (band.1 - band.0),
+            "{lo}..{hi} in {band:?}"
+        );
+        // Still turned about the statue's own vertical axis, and home is where it started.
+        assert!((orbit.target.x - 2.3).abs() < 1e-4 && (orbit.target.z - 5.3).abs() < 1e-4);
+        let home = orbit;
+        orbit.yaw += 1.0;
+        orbit.reset();
+        assert_eq!(orbit, home);
+    }
+}
+
+#[test]
 fn screen_ray_and_projection_agree() {
     let mut orbit = OrbitCamera {
         yaw: 0.7,
@@ -630,8 +695,48 @@ fn friendly_names_and_status_lines() {
     assert_eq!(carousel_step(0, 0, 1), 0);
     let texts = KioskConfig::default().texts;
     assert_eq!(status_text(&StatueState::Loading, &texts), texts.loading);
-    let fitting = status_text(&StatueState::Fitting { units: 42 }, &texts);
-    assert!(fitting.starts_with(&texts.fitting) && fitting.ends_with("42"));
+    // Fitting: the share done as a whole percentage, rounded down (100 only when finished),
+    // whatever the work-unit count; binding shows 100%.
+    let fitting = |units, fraction| status_text(&StatueState::Fitting { units, fraction }, &texts);
+    assert_eq!(fitting(42, 0.5), format!("{} 50%", texts.fitting));
+    assert_eq!(fitting(7, 0.5), fitting(9000, 0.5));
+    assert_eq!(fitting(1, 0.0), format!("{} 0%", texts.fitting));
+    assert_eq!(fitting(1, 0.999), format!("{} 99%", texts.fitting));
+    assert_eq!(fitting(1, 1.0), format!("{} 100%", texts.fitting));
+    assert_eq!(
+        status_text(&StatueState::Binding, &texts),
+        format!("{} 100%", texts.fitting)
+    );
+    assert_eq!(fitting_percent(f32::NAN), 0);
+    assert_eq!(fitting_percent(-0.5), 0);
+    assert_eq!(fitting_percent(1.5), 100);
+    assert_eq!(fitting_percent(0.4271), 42);
+    // The progress bar: FAKIR's share while fitting (as shown), full while binding, none
+    // otherwise.
+    let bar = |s: StatueState| progress_fraction(&s);
+    assert_eq!(
+        bar(StatueState::Fitting {
+            units: 3,
+            fraction: 0.4271
+        }),
+        Some(0.42)
+    );
+    assert_eq!(bar(StatueState::Binding), Some(1.0));
+    assert_eq!(bar(StatueState::Loading), None);
+    assert_eq!(bar(StatueState::Ready), None);
+    // A translation places the number itself.
+    let mut french = texts.clone();
+    french.fitting = "Révélation de l’anatomie… {percent} %".into();
+    assert_eq!(
+        status_text(
+            &StatueState::Fitting {
+                units: 3,
+                fraction: 0.25
+            },
+            &french
+        ),
+        "Révélation de l’anatomie… 25 %"
+    );
     assert_eq!(status_text(&StatueState::Ready, &texts), "");
     assert_eq!(
         ascii_fallback("1817–22 · scan “x” … ok"),

@@ -163,6 +163,19 @@ height = {HEIGHT}
             100.0 * bg
         );
     }
+    // The statue is framed between the top bar and the status line above the pose strip
+    // (issue 5: the hint sat on the statue's base): the rows just under the top bar and just
+    // above the bottom column are background across the middle.
+    let top = pygmalion::kiosk::ui::SCENE_TOP_PX / HEIGHT as f32;
+    let bottom = 1.0 - pygmalion::kiosk::ui::SCENE_BOTTOM_PX / HEIGHT as f32;
+    for rows in [(top + 0.002, top + 0.012), (bottom - 0.012, bottom - 0.002)] {
+        let bg = fraction(&img, (0.3, 0.7), rows, is_background);
+        assert!(
+            bg > 0.98,
+            "rows {rows:?} of the middle are only {:.0}% background",
+            100.0 * bg
+        );
+    }
     // Lit: the stone is shaded, not one flat colour (light and dark greys in the centre).
     let light = fraction(&img, (0.4, 0.6), (0.25, 0.75), |c| {
         c[1] > 150 && (c[0] as i32 - c[2] as i32).abs() < 50
@@ -426,7 +439,10 @@ mod parts {
     #[test]
     fn bones_show_while_fitting_posing_or_toggled() {
         let ready = StatueState::Ready;
-        let fitting = StatueState::Fitting { units: 3 };
+        let fitting = StatueState::Fitting {
+            units: 3,
+            fraction: 0.1,
+        };
         assert!(!bones_visible(false, Some(&ready), false));
         assert!(bones_visible(true, Some(&ready), false));
         assert!(bones_visible(false, Some(&ready), true));

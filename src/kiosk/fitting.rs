@@ -1,8 +1,11 @@
 //! Incremental FAKIR in the frame loop: each frame the statue's [`Registration`] runs for at
 //! most the configured budget (it stops at the first work-unit boundary after it), and the
 //! statue's [`CurrentPose`] shows the skeleton as it is — visitors watch the bones move,
-//! stretch and settle onto the statue. When the fit is done the binding is built off the main
-//! thread and both are cached ([`super::statue::write_cache`]).
+//! stretch and settle onto the statue. The statue's [`StatueState::Fitting`] carries the work
+//! units done (for the operator) and FAKIR's estimate of the share done
+//! (`Progress.activity.fraction`, held never decreasing), which the status line shows as a
+//! percentage. When the fit is done the binding is built off the main thread and both are
+//! cached ([`super::statue::write_cache`]).
 
 use super::statue::{CacheKey, Pending, StatueTemplate, write_cache};
 use super::{
@@ -123,8 +126,14 @@ fn step_fitting(
                 }
             }
         }
+        // FAKIR's fraction never decreases; the kiosk holds to that whatever happens.
+        let shown = match *state {
+            StatueState::Fitting { fraction, .. } => fraction,
+            _ => 0.0,
+        };
         *state = StatueState::Fitting {
             units: progress.units,
+            fraction: progress.activity.fraction.clamp(0.0, 1.0).max(shown),
         };
         if !reg.is_done() {
             continue;

@@ -107,8 +107,10 @@ pub struct Statue {
 pub enum StatueState {
     /// The file is being read (and normals estimated) off the main thread.
     Loading,
-    /// FAKIR is running, a budget per frame; `units` counts the work units done so far.
-    Fitting { units: u64 },
+    /// FAKIR is running, a budget per frame; `units` counts the work units done so far and
+    /// `fraction` estimates the share of the fit done (FAKIR's `Progress.activity.fraction`,
+    /// in `[0, 1]`, never decreasing): visitors see it as a percentage and a bar.
+    Fitting { units: u64, fraction: f32 },
     /// The fit is done; the binding is being built off the main thread.
     Binding,
     /// Ready to pose.
@@ -229,6 +231,28 @@ impl OrbitCamera {
     }
 }
 
+/// Logical pixels the interface covers at the top and at the bottom of the window: the scene
+/// between them is where the statue is framed ([`statue::frame_camera`]). The defaults are
+/// those of the visitor interface at its usual size; with a window the UI plugin measures its
+/// own layout every frame and keeps this up to date ([`ui`]).
+#[derive(Resource, Clone, Copy, Debug, PartialEq)]
+pub struct SceneMargins {
+    /// From the window's top edge to the bottom of the top bar.
+    pub top: f32,
+    /// From the top of the status/hint line (above the pose strip) to the window's bottom
+    /// edge.
+    pub bottom: f32,
+}
+
+impl Default for SceneMargins {
+    fn default() -> Self {
+        SceneMargins {
+            top: ui::SCENE_TOP_PX,
+            bottom: ui::SCENE_BOTTOM_PX,
+        }
+    }
+}
+
 /// A visitor asked for a pose (by name, from the pose strip or attract mode).
 #[derive(Message, Clone, Debug)]
 pub struct PoseRequested(pub String);
@@ -262,6 +286,7 @@ impl Plugin for KioskPlugin {
             .init_resource::<Selection>()
             .init_resource::<ShowBones>()
             .init_resource::<OrbitCamera>()
+            .init_resource::<SceneMargins>()
             .add_message::<PoseRequested>()
             .add_message::<StatueSelected>()
             .add_message::<ResetRequested>()

@@ -545,8 +545,8 @@ const HEAD_H: f32 = 60.0;
 const ENTRY_H: f32 = 100.0;
 const GAP: f32 = 10.0;
 const CLOSE_H: f32 = 72.0;
-/// Room kept free at the bottom (hint and pose strip).
-const BOTTOM: f32 = 190.0;
+/// Room kept free at the bottom (status/hint line and pose strip with its pictograms).
+const BOTTOM: f32 = ui::SCENE_BOTTOM_PX;
 const STRIP_W: f32 = 380.0;
 const STRIP_H: f32 = 84.0;
 const UNDO_W: f32 = 180.0;

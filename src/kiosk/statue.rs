@@ -7,11 +7,16 @@
 //! the template's name and source text, the point budget and [`CACHE_VERSION`]. A changed file,
 //! template or budget gives another key, so stale entries are never used; an unreadable or
 //! damaged entry is ignored (and the statue fitted again).
+//!
+//! **Framing.** A loaded statue is framed in the band of the window the interface leaves free
+//! ([`super::SceneMargins`], measured by the UI plugin), by moving the point looked at down the
+//! statue's vertical axis and choosing the home distance ([`frame_camera`]); it is framed
+//! again if the window or the margins change later ([`Framing`]).
 
 use super::config::StatueEntry;
 use super::{
-    ActiveStatue, CurrentPose, FittedSkeleton, KioskSet, OrbitCamera, ResetRequested, Settings,
-    SkinnedPoints, Statue, StatueBinding, StatueCloud, StatueSelected, StatueState,
+    ActiveStatue, CurrentPose, FittedSkeleton, KioskSet, OrbitCamera, ResetRequested, SceneMargins,
+    Settings, SkinnedPoints, Statue, StatueBinding, StatueCloud, StatueSelected, StatueState,
 };
 use crate::anatomy::{Skeleton, Template};
 use crate::cloud::PointCloud;
@@ -178,14 +183,25 @@ pub struct StatuePlugin;
 
 impl Plugin for StatuePlugin {
     fn build(&self, app: &mut App) {
-        app.add_systems(
-            Update,
-            (switch_statue, spawn_active_statue, finish_loading)
-                .chain()
-                .in_set(KioskSet::Load),
-        );
+        app.init_resource::<Framing>()
+            .init_resource::<SceneMargins>()
+            .add_systems(
+                Update,
+                (
+                    switch_statue,
+                    spawn_active_statue,
+                    finish_loading,
+                    reframe_camera,
+                )
+                    .chain()
+                    .in_set(KioskSet::Load),
+            );
     }
 }
+
+/// The window size and scene margins the camera was last framed for ([`frame_camera`]).
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq)]
+pub struct Framing(pub Option<(Vec2, SceneMargins)>);
 
 /// The statue's cache key (for writing the fit when it is done).
 #[derive(Component, Clone, Debug)]
@@ -267,6 +283,10 @@ fn finish_loading(
     mut commands: Commands,
     mut q: Query<(Entity, &mut StatueState, &Pending<Result<Loaded>>)>,
     mut camera: ResMut<OrbitCamera>,
+    margins: Res<SceneMargins>,
+    settings: Res<Settings>,
+    windows: Query<&Window, With<bevy::window::PrimaryWindow>>,
+    mut framing: ResMut<Framing>,
 ) {
     for (e, mut state, pending) in &mut q {
         let Some(r) = pending.take() else { continue };
@@ -280,7 +300,9 @@ fn finish_loading(
                 };
             }
             Ok(loaded) => {
-                frame_camera(&mut camera, &loaded.cloud);
+                let screen = super::restore::screen_size(windows.iter().next(), &settings.0);
+                frame_camera(&mut camera, &loaded.cloud, screen, *margins);
+                framing.0 = Some((screen, *margins));
                 let cloud = loaded.cloud.clone();
                 ec.insert((
                     StatueCloud(cloud.clone()),
@@ -314,7 +336,10 @@ fn finish_loading(
                         *state = StatueState::Ready;
                     }
                     None => {
-                        *state = StatueState::Fitting { units: 0 };
+                        *state = StatueState::Fitting {
+                            units: 0,
+                            fraction: 0.0,
+                        };
                     }
                 }
             }
@@ -322,12 +347,102 @@ fn finish_loading(
     }
 }
 
-/// Frames the orbit camera on a cloud (home view: from the front, a little above).
-pub fn frame_camera(camera: &mut OrbitCamera, cloud: &PointCloud) {
-    if let Some(b) = cloud.bounding_box() {
-        let size = b.size().max_element().max(1e-6);
-        camera.target = b.center();
-        camera.home = (0.0, 0.1, 1.9 * size);
-        camera.reset();
+/// Frames the camera again (home view) when the window or the interface's margins change by
+/// more than 2 logical pixels after the statue was framed (a window going fullscreen, a
+/// pose strip wrapping onto a second row).
+fn reframe_camera(
+    active: Res<ActiveStatue>,
+    clouds: Query<&StatueCloud>,
+    margins: Res<SceneMargins>,
+    settings: Res<Settings>,
+    windows: Query<&Window, With<bevy::window::PrimaryWindow>>,
+    mut framing: ResMut<Framing>,
+    mut camera: ResMut<OrbitCamera>,
+) {
+    let (Some((screen, m)), Some(cloud)) =
+        (framing.0, active.entity.and_then(|e| clouds.get(e).ok()))
+    else {
+        return;
+    };
+    let now = super::restore::screen_size(windows.iter().next(), &settings.0);
+    let moved = (now - screen).abs().max_element() > 2.0
+        || (m.top - margins.top).abs() > 2.0
+        || (m.bottom - margins.bottom).abs() > 2.0;
+    if moved {
+        frame_camera(&mut camera, &cloud.0, now, *margins);
+        framing.0 = Some((now, *margins));
     }
+}
+
+/// Share of the free scene band's height the statue's box fills in the home view.
+pub const SCENE_FILL: f32 = 0.94;
+
+/// Frames the orbit camera on a cloud: the home view looks from the front, a little above
+/// (pitch 0.1 rad), and the cloud's bounding box fills [`SCENE_FILL`] of the height of the
+/// band the interface leaves free on a window of logical size `screen` (`margins`), centred
+/// in it. The band is rarely centred on the screen (the pose strip is taller than the top
+/// bar), so the point looked at is moved down the vertical axis through the statue's centre
+/// rather than panned: the statue shows higher, orbiting still turns it about its own axis,
+/// and a reset or a double tap keeps the framing. Distance and shift are found by projecting
+/// the box's corners with the kiosk's own view ([`super::gestures::View`]) a few times (the
+/// perspective makes the near corners larger). A band under 40% of the screen's height is
+/// widened to that, about its centre.
+pub fn frame_camera(
+    camera: &mut OrbitCamera,
+    cloud: &PointCloud,
+    screen: Vec2,
+    margins: SceneMargins,
+) {
+    use super::gestures::{FOV_Y, View};
+    let Some(b) = cloud.bounding_box() else {
+        return;
+    };
+    let size = b.size().max_element().max(1e-6);
+    let screen = screen.max(Vec2::ONE);
+    let (mut top, mut bottom) = (margins.top, screen.y - margins.bottom);
+    let min_band = 0.4 * screen.y;
+    if bottom - top < min_band {
+        let mid = ((top + bottom) * 0.5).clamp(min_band * 0.5, screen.y - min_band * 0.5);
+        (top, bottom) = (mid - min_band * 0.5, mid + min_band * 0.5);
+    }
+    let want = (bottom - top) * SCENE_FILL;
+    let band_mid = (top + bottom) * 0.5;
+    let corners: Vec<Vec3> = (0..8)
+        .map(|i| {
+            Vec3::new(
+                if i & 1 == 0 { b.min.x } else { b.max.x },
+                if i & 2 == 0 { b.min.y } else { b.max.y },
+                if i & 4 == 0 { b.min.z } else { b.max.z },
+            )
+        })
+        .collect();
+    let pitch = 0.1;
+    let mut distance = 1.9 * size;
+    camera.target = b.center();
+    for _ in 0..8 {
+        camera.home = (0.0, pitch, distance);
+        camera.reset();
+        let view = View::from_orbit(camera, screen, FOV_Y);
+        let ys: Vec<f32> = corners
+            .iter()
+            .filter_map(|&c| view.project(c).map(|p| p.y))
+            .collect();
+        if ys.len() < corners.len() {
+            // A corner behind the eye: step back.
+            distance *= 1.5;
+            continue;
+        }
+        let (lo, hi) = ys
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &y| {
+                (l.min(y), h.max(y))
+            });
+        // Too low on screen (larger y): look lower, by the world size of that many pixels at
+        // the target's depth.
+        let pixel = view.pixel_size() * distance;
+        camera.target.y -= ((lo + hi) * 0.5 - band_mid) * pixel;
+        distance *= ((hi - lo) / want).clamp(0.25, 4.0);
+    }
+    camera.home = (0.0, pitch, distance);
+    camera.reset();
 }

@@ -4,12 +4,15 @@
 //! ┌────────────────────────────────────────────────────────────────────┐
 //! │ Pygmalion          [<]  Dancing Girl  [>]                  [Reset] │
 //! │                         credit line                                │
-//! │                     status (loading / fitting · n)                 │
+//! ├──────────────────── SceneMargins::top ─────────────────────────────┤
 //! │                      ┌ error card (failed) ┐      ┌ operator ┐     │
 //! │                      └─────────────────────┘      │ panel    │     │
-//! │                                                   └──────────┘     │
+//! │                    (the statue, framed here)      └──────────┘     │
+//! ├──────────────────── SceneMargins::bottom ──────────────────────────┤
+//! │      status: loading / fitting · 42 % ▬▬▬▬▭▭▭  or, when ready,     │
 //! │                 hint: touch the statue to turn it…                 │
-//! │ [Original] [Greeting] [Arms raised] [Contrapposto] [Walking] …      │
+//! │ [ 🯅  ] [ 🯅  ] [ 🯅  ]  …  one button per pose: pictogram,         │
+//! │ Original Greeting Arms raised           label under it            │
 //! └────────────────────────────────────────────────────────────────────┘
 //!            "still there?" overlay with the countdown (over everything)
 //! ```
@@ -22,11 +25,39 @@
 //! operator panel also toggles on F2 and on a three-finger tap ([`ThreeFingerTap`]). With
 //! `headless: false` the plugin also spawns the nodes ([`UiPart`] marks the ones it updates)
 //! and keeps their texts and visibility up to date: title and credit of the active statue,
-//! the status line (`texts.loading`, `texts.fitting` with the registration's work-unit count
-//! as a progress figure), the error card (`texts.load_failed`; the carousel still works), the
+//! the status line, the error card (`texts.load_failed`; the carousel still works), the
 //! "still there?" overlay with its countdown, the hint, and the operator panel (skinning
-//! method, bones on/off, fps, last registration and skinning milliseconds, configuration
-//! problems and the statue's failure message).
+//! method, bones on/off, fps, last registration and skinning milliseconds, the fit's share
+//! done and work units, configuration problems and the statue's failure message).
+//!
+//! **Status line and progress.** While the statue loads the line says `texts.loading`; while
+//! FAKIR fits it, `texts.fitting` with the share done as a whole percentage
+//! ([`fitting_percent`] of FAKIR's never-decreasing `Progress.activity.fraction`, rounded
+//! down so that 100 % means finished; `{percent}` in the text places it, else it is
+//! appended) over a thin bar filled to the same share; while the binding is built, 100 %.
+//! The raw work-unit count, which says nothing to a visitor, is on the operator panel. The
+//! line shares its place with the hint (shown once the statue is ready): the two never show
+//! together, so the place above the pose strip is reserved once and the layout does not jump.
+//!
+//! **Pose pictograms.** Each pose button shows a small picture of the pose above its label:
+//! the active statue's template in that pose, drawn from the pose data by the bevy-free
+//! [`crate::render::pictogram`] ([`POSE_ICON_PX`], three-quarter view, transparent
+//! background) and turned into a Bevy `Image`. A pose file a museum adds to the strip gets its
+//! pictogram with no further work; a pose that does not fit the template gets none (logged).
+//! The pictograms are redrawn when the carousel brings a statue of another template.
+//! "Original" (`identity`: back to the statue as scanned) has no pose to draw, and its fitted
+//! skeleton is no help (on real scans FAKIR's fit is often crouched or twisted, and a visitor
+//! would read that as a pose); it shows instead a small picture of the statue itself, its
+//! cloud from the front by the point renderer ([`statue_picture`]), once loaded (the rest
+//! figure until then), redrawn when the cloud changes (a part swap). Buttons stay at least
+//! 150 × 118 logical pixels, the pictogram 64 × 76 above a 20-pixel label.
+//!
+//! **Where the statue goes.** The top bar and the bottom column (status/hint line and pose
+//! strip) are measured after each layout and written to [`SceneMargins`]; the statue is framed
+//! in the band between them ([`super::statue::frame_camera`]), so the hint and the strip never
+//! cover its base (at 1280 × 800 the strip with its pictograms is about 220 px tall, the top
+//! bar 128 px). Before the first layout (and headless) the margins are [`SCENE_TOP_PX`] and
+//! [`SCENE_BOTTOM_PX`].
 //!
 //! **Font.** Bevy's built-in font covers ASCII only (no "…", "·", "–", accents), so at
 //! start the plugin loads the first readable font of [`font_candidates`]
@@ -43,13 +74,38 @@ use super::config::Texts;
 use super::fitting::FitWork;
 use super::gestures::ThreeFingerTap;
 use super::{
-    ActiveStatue, Interaction, KioskSet, PoseRequested, ResetRequested, Settings, ShowBones,
-    Statue, StatueSelected, StatueState,
+    ActiveStatue, Interaction, KioskSet, PoseRequested, ResetRequested, SceneMargins, Settings,
+    ShowBones, Statue, StatueCloud, StatueSelected, StatueState,
 };
+use crate::anatomy::{Pose, Template};
+use crate::cloud::PointCloud;
+use crate::render::pictogram::{PictogramOptions, named_pose_pictogram};
 use crate::skinning::Method;
 use bevy::prelude::*;
-use bevy::ui::Interaction as UiInteraction;
+use bevy::ui::{ComputedNode, Interaction as UiInteraction, UiGlobalTransform};
+use bevy::window::PrimaryWindow;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Size of a pose pictogram on its button, logical pixels (width, height).
+pub const POSE_ICON_PX: (u32, u32) = (64, 76);
+/// Smallest pose button, logical pixels (width, height): pictogram and label.
+pub const POSE_BUTTON_PX: (f32, f32) = (150.0, 118.0);
+/// Height kept for the status line (with its bar) or the hint, logical pixels.
+pub const STATUS_SLOT_PX: f32 = 52.0;
+/// Padding around the whole interface, logical pixels.
+const EDGE_PX: f32 = 16.0;
+/// Padding inside cards, logical pixels.
+const CARD_PAD_PX: f32 = 12.0;
+/// Gap between the status/hint line and the pose strip, logical pixels.
+const BOTTOM_GAP_PX: f32 = 12.0;
+/// [`SceneMargins::top`] before the layout is measured: the top bar (its 88-pixel buttons in
+/// a card).
+pub const SCENE_TOP_PX: f32 = EDGE_PX + 2.0 * CARD_PAD_PX + 88.0;
+/// [`SceneMargins::bottom`] before the layout is measured: status/hint line, gap, one row of
+/// pose buttons in a card.
+pub const SCENE_BOTTOM_PX: f32 =
+    EDGE_PX + 2.0 * CARD_PAD_PX + POSE_BUTTON_PX.1 + BOTTOM_GAP_PX + STATUS_SLOT_PX;
 
 /// The visitor interface.
 pub struct UiPlugin {
@@ -99,9 +155,19 @@ pub struct UiFont {
 #[derive(Component, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum UiPart {
     Title,
+    /// The top row (title, carousel card, reset): its bottom is [`SceneMargins::top`].
+    TopBar,
     StatueTitle,
     Credit,
+    /// The bottom column (status/hint line and pose strip): its top is
+    /// [`SceneMargins::bottom`] from the window's bottom edge.
+    BottomBar,
+    /// The status card (text and progress bar).
     Status,
+    StatusText,
+    /// The progress bar's track and its fill (width: the percentage).
+    ProgressTrack,
+    ProgressFill,
     Hint,
     PoseStrip,
     ErrorCard,
@@ -117,9 +183,14 @@ pub enum UiPart {
     Problems,
 }
 
+/// The pictogram of a pose button ([`UiAction::Pose`] of its button): the pose name.
+#[derive(Component, Clone, Debug, PartialEq)]
+pub struct PoseIcon(pub String);
+
 impl Plugin for UiPlugin {
     fn build(&self, app: &mut App) {
         app.init_resource::<OperatorPanel>()
+            .init_resource::<SceneMargins>()
             .init_resource::<UiFont>()
             .init_resource::<FrameRate>()
             .init_resource::<ShowBones>()
@@ -138,7 +209,12 @@ impl Plugin for UiPlugin {
             app.add_systems(Startup, (load_font, spawn_ui).chain())
                 .add_systems(
                     Update,
-                    (update_texts, update_buttons)
+                    (
+                        update_texts,
+                        update_buttons,
+                        update_pose_icons,
+                        measure_scene_margins,
+                    )
                         .after(measure_fps)
                         .in_set(KioskSet::Ui),
                 );
@@ -176,14 +252,72 @@ pub fn carousel_step(current: usize, count: usize, step: isize) -> usize {
     (current as isize + step).rem_euclid(count as isize) as usize
 }
 
-/// The status line for a statue state (empty when there is nothing to say).
+/// The share of the fit done as a whole percentage, rounded down (100 only when finished; a
+/// non-finite fraction counts as 0).
+pub fn fitting_percent(fraction: f32) -> u32 {
+    if fraction.is_finite() {
+        (fraction.clamp(0.0, 1.0) * 100.0).floor() as u32
+    } else {
+        0
+    }
+}
+
+/// The share of the fit a state shows on the progress bar, in `[0, 1]`: FAKIR's fraction
+/// while fitting, 1 while binding, `None` when there is no bar (loading, ready, failed).
+pub fn progress_fraction(state: &StatueState) -> Option<f32> {
+    match state {
+        StatueState::Fitting { fraction, .. } => Some(fitting_percent(*fraction) as f32 / 100.0),
+        StatueState::Binding => Some(1.0),
+        _ => None,
+    }
+}
+
+/// `texts.fitting` with a percentage: in place of `{percent}` when the text has it (a
+/// translation can write "… {percent} %"), else appended as "… 42%".
+pub fn fitting_text(texts: &Texts, percent: u32) -> String {
+    if texts.fitting.contains("{percent}") {
+        texts.fitting.replace("{percent}", &percent.to_string())
+    } else {
+        format!("{} {percent}%", texts.fitting)
+    }
+}
+
+/// The status line for a statue state (empty when there is nothing to say): loading, or the
+/// fit's share done as a percentage (100 % while the binding is built).
 pub fn status_text(state: &StatueState, texts: &Texts) -> String {
     match state {
         StatueState::Loading => texts.loading.clone(),
-        StatueState::Fitting { units } => format!("{} · {units}", texts.fitting),
-        StatueState::Binding => texts.fitting.clone(),
+        StatueState::Fitting { fraction, .. } => fitting_text(texts, fitting_percent(*fraction)),
+        StatueState::Binding => fitting_text(texts, 100),
         StatueState::Ready | StatueState::Failed { .. } => String::new(),
     }
+}
+
+/// How the kiosk draws its pose pictograms: [`PictogramOptions`]' defaults at
+/// [`POSE_ICON_PX`].
+pub fn pose_icon_options() -> PictogramOptions {
+    PictogramOptions {
+        width: POSE_ICON_PX.0,
+        height: POSE_ICON_PX.1,
+        ..PictogramOptions::default()
+    }
+}
+
+/// RGBA pixels (sRGB, straight alpha, `width × height`, top row first) as a Bevy image.
+pub fn rgba_image(width: u32, height: u32, rgba: Vec<u8>) -> Image {
+    use bevy::asset::RenderAssetUsages;
+    use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
+    Image::new(
+        Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        TextureDimension::D2,
+        rgba,
+        TextureFormat::Rgba8UnormSrgb,
+        RenderAssetUsages::default(),
+    )
 }
 
 /// Where the interface looks for its font, in order: `<assets_root>/fonts/ui.ttf` (or
@@ -318,6 +452,8 @@ const BUTTON_PRESSED: Color = Color::srgba(0.42, 0.47, 0.56, 1.0);
 const BUTTON_ON: Color = Color::srgba(0.18, 0.44, 0.52, 0.95);
 const ERROR_CARD: Color = Color::srgba(0.30, 0.14, 0.12, 0.88);
 const OVERLAY: Color = Color::srgba(0.0, 0.0, 0.0, 0.62);
+const PROGRESS_TRACK: Color = Color::srgba(1.0, 1.0, 1.0, 0.16);
+const PROGRESS_FILL: Color = Color::srgb(0.93, 0.62, 0.33);
 
 fn button_node(min_width: f32, min_height: f32) -> Node {
     Node {
@@ -384,13 +520,41 @@ impl Look {
             children![self.text(label, size, FG)],
         )
     }
+
+    /// A pose button: the pose's pictogram ([`PoseIcon`], drawn by [`update_pose_icons`])
+    /// over its friendly name.
+    fn pose_button(&self, pose: &str) -> impl Bundle {
+        (
+            Button,
+            UiAction::Pose(pose.to_string()),
+            Node {
+                flex_direction: FlexDirection::Column,
+                row_gap: Val::Px(2.0),
+                padding: UiRect::axes(Val::Px(18.0), Val::Px(8.0)),
+                ..button_node(POSE_BUTTON_PX.0, POSE_BUTTON_PX.1)
+            },
+            BackgroundColor(BUTTON),
+            children![
+                (
+                    ImageNode::default(),
+                    Node {
+                        width: Val::Px(POSE_ICON_PX.0 as f32),
+                        height: Val::Px(POSE_ICON_PX.1 as f32),
+                        ..default()
+                    },
+                    PoseIcon(pose.to_string()),
+                ),
+                self.text(friendly_pose_name(pose), 20.0, FG),
+            ],
+        )
+    }
 }
 
 fn card(node: Node) -> (Node, BackgroundColor) {
     (
         Node {
             border_radius: BorderRadius::all(Val::Px(18.0)),
-            padding: UiRect::all(Val::Px(12.0)),
+            padding: UiRect::all(Val::Px(CARD_PAD_PX)),
             ..node
         },
         BackgroundColor(CARD),
@@ -410,17 +574,20 @@ fn spawn_ui(mut commands: Commands, settings: Res<Settings>, font: Res<UiFont>) 
             position_type: PositionType::Absolute,
             flex_direction: FlexDirection::Column,
             justify_content: JustifyContent::SpaceBetween,
-            padding: UiRect::all(Val::Px(16.0)),
+            padding: UiRect::all(Val::Px(EDGE_PX)),
             ..default()
         })
         .with_children(|root| {
             // Top bar: title, carousel, reset.
-            root.spawn(Node {
-                flex_direction: FlexDirection::Row,
-                justify_content: JustifyContent::SpaceBetween,
-                align_items: AlignItems::FlexStart,
-                ..default()
-            })
+            root.spawn((
+                Node {
+                    flex_direction: FlexDirection::Row,
+                    justify_content: JustifyContent::SpaceBetween,
+                    align_items: AlignItems::FlexStart,
+                    ..default()
+                },
+                UiPart::TopBar,
+            ))
             .with_children(|top| {
                 top.spawn((look.text(t.title.clone(), 30.0, FG_DIM), UiPart::Title));
                 top.spawn((
@@ -455,26 +622,15 @@ fn spawn_ui(mut commands: Commands, settings: Res<Settings>, font: Res<UiFont>) 
                 });
                 top.spawn(look.button(UiAction::Reset, t.reset.clone(), 28.0, 140.0, 88.0));
             });
-            // Middle: status line and the error card.
+            // Middle: the error card (over the scene; the statue is framed here).
             root.spawn(Node {
                 flex_grow: 1.0,
                 flex_direction: FlexDirection::Column,
                 align_items: AlignItems::Center,
-                row_gap: Val::Px(24.0),
-                padding: UiRect::top(Val::Px(16.0)),
+                justify_content: JustifyContent::Center,
                 ..default()
             })
             .with_children(|mid| {
-                mid.spawn((
-                    look.text(t.loading.clone(), 26.0, FG),
-                    Node {
-                        padding: UiRect::axes(Val::Px(18.0), Val::Px(8.0)),
-                        border_radius: BorderRadius::all(Val::Px(16.0)),
-                        ..default()
-                    },
-                    BackgroundColor(CARD),
-                    UiPart::Status,
-                ));
                 mid.spawn((
                     Node {
                         max_width: Val::Px(640.0),
@@ -494,15 +650,84 @@ fn spawn_ui(mut commands: Commands, settings: Res<Settings>, font: Res<UiFont>) 
                     ));
                 });
             });
-            // Bottom: hint and pose strip.
-            root.spawn(Node {
-                flex_direction: FlexDirection::Column,
-                align_items: AlignItems::Center,
-                row_gap: Val::Px(12.0),
-                ..default()
-            })
+            // Bottom: the status line or the hint (one place, never both), and the pose strip.
+            root.spawn((
+                Node {
+                    flex_direction: FlexDirection::Column,
+                    align_items: AlignItems::Center,
+                    row_gap: Val::Px(BOTTOM_GAP_PX),
+                    ..default()
+                },
+                UiPart::BottomBar,
+            ))
             .with_children(|bottom| {
-                bottom.spawn((look.text(t.hint.clone(), 22.0, FG_DIM), UiPart::Hint));
+                // One grid cell holding both, so the place is the same whichever shows.
+                let cell = || Node {
+                    grid_row: GridPlacement::start(1),
+                    grid_column: GridPlacement::start(1),
+                    justify_self: JustifySelf::Center,
+                    align_self: AlignSelf::Center,
+                    ..default()
+                };
+                bottom
+                    .spawn(Node {
+                        display: Display::Grid,
+                        grid_template_columns: vec![GridTrack::auto()],
+                        grid_template_rows: vec![GridTrack::auto()],
+                        min_height: Val::Px(STATUS_SLOT_PX),
+                        align_items: AlignItems::Center,
+                        justify_items: JustifyItems::Center,
+                        ..default()
+                    })
+                    .with_children(|slot| {
+                        slot.spawn((
+                            look.text(t.hint.clone(), 22.0, FG_DIM),
+                            cell(),
+                            UiPart::Hint,
+                        ));
+                        slot.spawn((
+                            Node {
+                                flex_direction: FlexDirection::Column,
+                                align_items: AlignItems::Stretch,
+                                row_gap: Val::Px(6.0),
+                                min_width: Val::Px(360.0),
+                                padding: UiRect::axes(Val::Px(18.0), Val::Px(7.0)),
+                                border_radius: BorderRadius::all(Val::Px(16.0)),
+                                ..cell()
+                            },
+                            BackgroundColor(CARD),
+                            UiPart::Status,
+                        ))
+                        .with_children(|st| {
+                            st.spawn((
+                                look.text(t.loading.clone(), 22.0, FG),
+                                TextLayout::justify(Justify::Center),
+                                UiPart::StatusText,
+                            ));
+                            st.spawn((
+                                Node {
+                                    height: Val::Px(5.0),
+                                    border_radius: BorderRadius::all(Val::Px(2.5)),
+                                    overflow: Overflow::clip(),
+                                    ..default()
+                                },
+                                BackgroundColor(PROGRESS_TRACK),
+                                Visibility::Hidden,
+                                UiPart::ProgressTrack,
+                            ))
+                            .with_children(|track| {
+                                track.spawn((
+                                    Node {
+                                        width: Val::Percent(0.0),
+                                        height: Val::Percent(100.0),
+                                        ..default()
+                                    },
+                                    BackgroundColor(PROGRESS_FILL),
+                                    UiPart::ProgressFill,
+                                ));
+                            });
+                        });
+                    });
                 bottom
                     .spawn((
                         card(Node {
@@ -518,13 +743,7 @@ fn spawn_ui(mut commands: Commands, settings: Res<Settings>, font: Res<UiFont>) 
                     ))
                     .with_children(|strip| {
                         for pose in &cfg.skinning.poses {
-                            strip.spawn(look.button(
-                                UiAction::Pose(pose.clone()),
-                                friendly_pose_name(pose),
-                                26.0,
-                                150.0,
-                                84.0,
-                            ));
+                            strip.spawn(look.pose_button(pose));
                         }
                     });
             });
@@ -687,6 +906,7 @@ fn update_texts(
     font: Res<UiFont>,
     mut texts: Query<(&UiPart, &mut Text)>,
     mut visibility: Query<(&UiPart, &mut Visibility)>,
+    mut nodes: Query<(&UiPart, &mut Node)>,
 ) {
     let cfg = &settings.0;
     let ascii = font.handle.is_none();
@@ -703,12 +923,22 @@ fn update_texts(
         _ => None,
     };
     let ready = matches!(state, Some(StatueState::Ready));
+    let progress = state.and_then(progress_fraction);
+    let fitting = match state {
+        Some(StatueState::Fitting { units, fraction }) => {
+            format!(
+                "\nfit {}% done, {units} work units",
+                fitting_percent(*fraction)
+            )
+        }
+        _ => String::new(),
+    };
     let still = match idle.as_deref() {
         Some(IdleState::StillThere { remaining_s }) => Some(*remaining_s),
         _ => None,
     };
     let work = format!(
-        "registration {:.1} ms (max {:.1}, budget {:.1})\nskinning {:.1} ms (max {:.1}, {} deforms)",
+        "registration {:.1} ms (max {:.1}, budget {:.1}){fitting}\nskinning {:.1} ms (max {:.1}, {} deforms)",
         fit.as_ref().map_or(0.0, |f| f.last_ms),
         fit.as_ref().map_or(0.0, |f| f.max_ms),
         fit.as_ref().map_or(0.0, |f| f.budget_ms),
@@ -731,7 +961,7 @@ fn update_texts(
                 set_text(ascii, &mut text, entry.map_or("", |e| e.title.as_str()))
             }
             UiPart::Credit => set_text(ascii, &mut text, entry.map_or("", |e| e.credit.as_str())),
-            UiPart::Status => set_text(ascii, &mut text, &status),
+            UiPart::StatusText => set_text(ascii, &mut text, &status),
             UiPart::Countdown => set_text(ascii, &mut text, &countdown_text(still.unwrap_or(0.0))),
             UiPart::BonesLabel => set_text(
                 ascii,
@@ -751,12 +981,169 @@ fn update_texts(
     for (part, mut v) in &mut visibility {
         match part {
             UiPart::Status => set_visible(&mut v, !status.is_empty()),
+            UiPart::ProgressTrack => set_visible(&mut v, progress.is_some()),
             UiPart::ErrorCard => set_visible(&mut v, failed.is_some()),
             UiPart::Hint => set_visible(&mut v, ready),
             UiPart::StillThere => set_visible(&mut v, still.is_some()),
             UiPart::OperatorPanel => set_visible(&mut v, panel.open),
             _ => {}
         }
+    }
+    let fill = Val::Percent(100.0 * progress.unwrap_or(0.0));
+    for (part, mut node) in &mut nodes {
+        if *part == UiPart::ProgressFill && node.width != fill {
+            node.width = fill;
+        }
+    }
+}
+
+/// What the pose pictograms were last drawn for (see [`update_pose_icons`]).
+#[derive(Default)]
+pub(crate) struct IconsDrawn {
+    /// The template of the pose pictograms.
+    template: Option<String>,
+    /// The statue and the change tick of the cloud the "Original" picture shows (`None`: the
+    /// rest figure).
+    original: Option<(Entity, bevy::ecs::change_detection::Tick)>,
+}
+
+/// Draws the pose buttons' pictograms (see the module docs): all of them when the active
+/// statue's template changes (the first frame included); "Original" again when the active
+/// statue's cloud appears or changes.
+pub(crate) fn update_pose_icons(
+    settings: Res<Settings>,
+    active: Option<Res<ActiveStatue>>,
+    clouds: Query<Ref<StatueCloud>>,
+    images: Option<ResMut<Assets<Image>>>,
+    mut icons: Query<(&PoseIcon, &mut ImageNode)>,
+    mut drawn: Local<IconsDrawn>,
+    mut template: Local<Option<Arc<Template>>>,
+) {
+    let Some(mut images) = images else { return };
+    let cfg = &settings.0;
+    let index = active.as_ref().map_or(0, |a| a.index);
+    let name = cfg
+        .statues
+        .get(index)
+        .map_or_else(|| "human".to_string(), |e| e.template.clone());
+    let options = pose_icon_options();
+    let mut set = |node: &mut Mut<ImageNode>, p: Option<(u32, u32, Vec<u8>)>| {
+        node.image = p.map_or_else(Handle::default, |(w, h, rgba)| {
+            images.add(rgba_image(w, h, rgba))
+        });
+    };
+    let identity = Pose::identity().name;
+    if drawn.template.as_deref() != Some(name.as_str()) {
+        drawn.template = Some(name.clone());
+        drawn.original = None;
+        *template = match Template::resolve(&name) {
+            Ok(t) => Some(Arc::new(t)),
+            Err(e) => {
+                warn!("no pose pictograms: {e}");
+                None
+            }
+        };
+        for (icon, mut node) in &mut icons {
+            let p = template.as_ref().and_then(|t| {
+                named_pose_pictogram(&icon.0, t.clone(), &options)
+                    .map_err(|e| warn!("no pictogram for the pose '{}': {e}", icon.0))
+                    .ok()
+            });
+            set(&mut node, p.map(|p| (p.width, p.height, p.rgba)));
+        }
+    }
+    // "Original": the statue itself once loaded (the rest figure until then).
+    let cloud = active
+        .as_ref()
+        .and_then(|a| a.entity)
+        .and_then(|e| clouds.get(e).ok().map(|c| (e, c)));
+    let key = cloud.as_ref().map(|(e, c)| (*e, c.last_changed()));
+    if key == drawn.original {
+        return;
+    }
+    let had_picture = drawn.original.is_some();
+    drawn.original = key;
+    if cloud.is_none() && !had_picture {
+        return;
+    }
+    for (icon, mut node) in &mut icons {
+        if icon.0 != identity {
+            continue;
+        }
+        let p = match (&cloud, template.as_ref()) {
+            (Some((_, c)), _) => Some(statue_picture(&c.0, POSE_ICON_PX)),
+            (None, Some(t)) => named_pose_pictogram(&identity, t.clone(), &options)
+                .ok()
+                .map(|p| (p.width, p.height, p.rgba)),
+            (None, None) => None,
+        };
+        set(&mut node, p);
+    }
+}
+
+/// Background of [`statue_picture`]'s rendering, keyed out to transparency afterwards (a
+/// colour no lit stone takes).
+const KEY: [u8; 3] = [255, 0, 255];
+
+/// A small picture of a statue's cloud as scanned, seen from the front (the home view's side)
+/// by the point renderer, on a transparent background: `(width, height, RGBA)`.
+pub fn statue_picture(cloud: &PointCloud, (w, h): (u32, u32)) -> (u32, u32, Vec<u8>) {
+    use crate::render::{Camera, RenderOptions, render};
+    let Some(b) = cloud.bounding_box() else {
+        return (w, h, vec![0; w as usize * h as usize * 4]);
+    };
+    let camera = Camera::front(b.min, b.max, w as f32 / h.max(1) as f32);
+    let img = render(
+        &cloud.positions,
+        cloud.normals.as_deref(),
+        cloud.colors.as_deref(),
+        &camera,
+        &RenderOptions {
+            width: w,
+            height: h,
+            background: KEY,
+            ..RenderOptions::default()
+        },
+    );
+    let rgba = img
+        .rgb
+        .chunks_exact(3)
+        .flat_map(|c| {
+            if c == KEY {
+                [0, 0, 0, 0]
+            } else {
+                [c[0], c[1], c[2], 255]
+            }
+        })
+        .collect();
+    (w, h, rgba)
+}
+
+/// Measures the top bar and the bottom column after the last layout into [`SceneMargins`]
+/// (logical pixels; a change under half a pixel is ignored).
+fn measure_scene_margins(
+    parts: Query<(&UiPart, &ComputedNode, &UiGlobalTransform)>,
+    windows: Query<&Window, With<PrimaryWindow>>,
+    mut margins: ResMut<SceneMargins>,
+) {
+    let Some(window) = windows.iter().next() else {
+        return;
+    };
+    let mut m = *margins;
+    for (part, node, at) in &parts {
+        if node.size.y <= 0.0 {
+            continue;
+        }
+        let k = node.inverse_scale_factor;
+        let (centre, half) = (at.translation.y * k, node.size.y * 0.5 * k);
+        match part {
+            UiPart::TopBar => m.top = centre + half,
+            UiPart::BottomBar => m.bottom = window.height() - (centre - half),
+            _ => {}
+        }
+    }
+    if (m.top - margins.top).abs() > 0.5 || (m.bottom - margins.bottom).abs() > 0.5 {
+        *margins = m;
     }
 }
 
