@@ -117,13 +117,18 @@ fn human_140k(runs: usize) -> Result<BenchResult> {
 struct UnitTimer {
     last: std::time::Instant,
     durations: Vec<f64>,
+    /// Longest unit per (phase, level): where the long units come from.
+    longest: std::collections::BTreeMap<String, f64>,
 }
 
 impl Pause for UnitTimer {
-    fn unit(&mut self, _: &Solver) -> Result<(), Cancelled> {
+    fn unit(&mut self, s: &Solver) -> Result<(), Cancelled> {
         let now = std::time::Instant::now();
         let d = (now - self.last).as_secs_f64();
         self.durations.push(d);
+        let key = format!("max_ms.{}.l{}", s.activity.phase, s.activity.level);
+        let e = self.longest.entry(key).or_default();
+        *e = e.max(1e3 * d);
         self.last = now;
         Ok(())
     }
@@ -131,11 +136,13 @@ impl Pause for UnitTimer {
 
 /// The longest work unit of a registration of a 100k-point synthetic human (the kiosk
 /// registers between frames, so no unit may take more than about 2 ms). `median_s` is the
-/// whole registration; `extra` gives the longest unit and the 99th and 50th percentiles.
+/// whole registration; `extra` gives the longest unit, the 99th and 50th percentiles, and the
+/// longest unit of each phase and level (`max_ms.<phase>.l<level>`).
 fn unit_100k(runs: usize) -> Result<BenchResult> {
     let statue = human(100_000)?;
     let t = statue.truth.template.clone();
     let mut durations = Vec::new();
+    let mut longest = Default::default();
     let mut r = time_it(
         "fakir/unit_100k",
         statue.cloud.len() as u64,
@@ -144,6 +151,7 @@ fn unit_100k(runs: usize) -> Result<BenchResult> {
             let mut timer = UnitTimer {
                 last: std::time::Instant::now(),
                 durations: Vec::new(),
+                longest: Default::default(),
             };
             let _ = register(
                 &statue.cloud,
@@ -152,6 +160,7 @@ fn unit_100k(runs: usize) -> Result<BenchResult> {
                 &mut timer,
             );
             durations = timer.durations;
+            longest = timer.longest;
         },
     );
     durations.sort_by(f64::total_cmp);
@@ -165,6 +174,7 @@ fn unit_100k(runs: usize) -> Result<BenchResult> {
     r.extra.insert("max_unit_ms".into(), 1e3 * pick(1.0));
     r.extra.insert("p99_unit_ms".into(), 1e3 * pick(0.99));
     r.extra.insert("p50_unit_ms".into(), 1e3 * pick(0.5));
+    r.extra.extend(longest);
     Ok(r)
 }
 

@@ -7,7 +7,7 @@
 use super::assign::Assignment;
 use super::lm::{
     EnergyTerms, Limits, OCCUPANCY_SAMPLES, OccupancyTerm, PRIOR_MARGIN, Param, RangePrior,
-    lm_iteration,
+    lm_iteration, normal_equations,
 };
 use super::world::{End, RadiusClasses, WorldSkeleton};
 use crate::anatomy::template::BoneKind;
@@ -258,6 +258,7 @@ impl<'p> Solver<'p> {
     ) -> Result<f64, Cancelled> {
         let mut lambda = 0.01f64;
         let mut last = f64::INFINITY;
+        let mut normal_eq = None;
         // Occupancy weights (see `OccupancyTerm`), fixed for this LM loop.
         // Only chain extremities get the occupancy term (see `OccupancyTerm`): bones without
         // children, and bones leaving a free root.
@@ -321,30 +322,50 @@ impl<'p> Solver<'p> {
                 },
             }
         });
+        // The energy terms borrow the solver, which a work unit needs whole: they are built
+        // afresh around each unit (cheap: references and a few small vectors).
+        macro_rules! terms {
+            () => {
+                EnergyTerms {
+                    assignment: &self.assignment,
+                    members: &self.members,
+                    bones: energy_bones,
+                    occupancy: match (
+                        &self.tree,
+                        self.settings.occupancy && !self.calibrating && !tips.is_empty(),
+                    ) {
+                        (Some(tree), true) => Some(OccupancyTerm {
+                            bones: tips.clone(),
+                            weights: weights.clone(),
+                            tree,
+                            positions: &self.tree_points,
+                            slack: 2.0 * self.spacing,
+                        }),
+                        _ => None,
+                    },
+                    prior: prior.clone(),
+                }
+            };
+        }
         for _ in 0..self.settings.lm_iterations {
-            let occupancy = match (
-                &self.tree,
-                self.settings.occupancy && !self.calibrating && !tips.is_empty(),
-            ) {
-                (Some(tree), true) => Some(OccupancyTerm {
-                    bones: tips.clone(),
-                    weights: weights.clone(),
-                    tree,
-                    positions: &self.tree_points,
-                    slack: 2.0 * self.spacing,
-                }),
-                _ => None,
-            };
-            let terms = EnergyTerms {
-                assignment: &self.assignment,
-                members: &self.members,
-                bones: energy_bones,
-                occupancy,
-                prior: prior.clone(),
-            };
-            if terms.count() == 0 && terms.occupancy.is_none() {
-                return Ok(0.0);
+            if normal_eq.is_none() {
+                // The normal equations and the trial step are two work units (the kiosk's
+                // frames are cut at unit boundaries; on a 100k-point level 1 each takes
+                // milliseconds).
+                let terms = terms!();
+                if terms.count() == 0 && terms.occupancy.is_none() {
+                    return Ok(0.0);
+                }
+                normal_eq = Some(normal_equations(
+                    &self.world,
+                    &self.classes,
+                    params,
+                    &terms,
+                    self.size,
+                ));
+                self.unit()?;
             }
+            let terms = terms!();
             let limits = if self.calibrating {
                 &self.calibration_limits
             } else {
@@ -359,6 +380,7 @@ impl<'p> Solver<'p> {
                 &mut lambda,
                 self.size,
                 clamp_bones,
+                &mut normal_eq,
             );
             self.unit()?;
             last = step.energy_after;
