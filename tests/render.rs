@@ -656,16 +656,14 @@ mod pictograms {
 
     use crate::common::scratch;
 
-    /// The built-in poses of `config/poses/`.
-    const POSES: [&str; 7] = [
-        "rest",
-        "contrapposto",
-        "arms_raised",
-        "walking",
-        "seated",
-        "thinker",
-        "greeting",
-    ];
+    /// The built-in poses of `config/poses/` (every built-in name but `identity`).
+    fn poses() -> Vec<&'static str> {
+        Pose::builtin_names()
+            .iter()
+            .copied()
+            .filter(|n| *n != "identity")
+            .collect()
+    }
 
     fn human() -> Arc<Template> {
         Arc::new(Template::builtin("human").unwrap())
@@ -706,7 +704,9 @@ mod pictograms {
     fn every_built_in_pose_gets_a_distinct_pictogram() {
         let o = PictogramOptions::default();
         let start = std::time::Instant::now();
-        let all: Vec<(Pictogram, Skeleton)> = POSES.iter().map(|n| draw(n, &o)).collect();
+        let names = poses();
+        assert!(names.len() >= 7, "the built-in poses: {names:?}");
+        let all: Vec<(Pictogram, Skeleton)> = names.iter().map(|n| draw(n, &o)).collect();
         println!(
             "{} pictograms in {:.1} ms",
             all.len(),
@@ -718,7 +718,7 @@ mod pictograms {
             .save_png(scratch("render_pictograms").join("poses.png"))
             .unwrap();
         let n = (o.width * o.height) as usize;
-        for (name, (p, _)) in POSES.iter().zip(&all) {
+        for (name, (p, _)) in names.iter().zip(&all) {
             let (x0, y0, x1, y1) = p.ink_bounds(128).expect("not empty");
             println!(
                 "{name}: {} pixels of ink, {}x{} pixels",
@@ -752,7 +752,7 @@ mod pictograms {
         for i in 0..all.len() {
             for j in 0..i {
                 let d = differing(&all[i].0, &all[j].0);
-                closest = closest.min((d, POSES[i], POSES[j]));
+                closest = closest.min((d, names[i], names[j]));
             }
         }
         println!(
