@@ -1022,21 +1022,21 @@ pub(crate) fn update_pose_icons(
     let Some(mut images) = images else { return };
     let cfg = &settings.0;
     let index = active.as_ref().map_or(0, |a| a.index);
-    let name = cfg
+    // Borrowed, not cloned: this runs every frame and usually finds nothing to redraw.
+    let name: &str = cfg
         .statues
         .get(index)
-        .map_or_else(|| "human".to_string(), |e| e.template.clone());
+        .map_or("human", |e| e.template.as_str());
     let options = pose_icon_options();
     let mut set = |node: &mut Mut<ImageNode>, p: Option<(u32, u32, Vec<u8>)>| {
         node.image = p.map_or_else(Handle::default, |(w, h, rgba)| {
             images.add(rgba_image(w, h, rgba))
         });
     };
-    let identity = Pose::identity().name;
-    if drawn.template.as_deref() != Some(name.as_str()) {
-        drawn.template = Some(name.clone());
+    if drawn.template.as_deref() != Some(name) {
+        drawn.template = Some(name.to_string());
         drawn.original = None;
-        *template = match Template::resolve(&name) {
+        *template = match Template::resolve(name) {
             Ok(t) => Some(Arc::new(t)),
             Err(e) => {
                 warn!("no pose pictograms: {e}");
@@ -1066,6 +1066,7 @@ pub(crate) fn update_pose_icons(
     if cloud.is_none() && !had_picture {
         return;
     }
+    let identity = Pose::identity().name;
     for (icon, mut node) in &mut icons {
         if icon.0 != identity {
             continue;
