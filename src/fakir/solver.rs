@@ -260,21 +260,24 @@ impl<'p> Solver<'p> {
         let mut last = f64::INFINITY;
         let mut normal_eq = None;
         // Occupancy weights (see `OccupancyTerm`), fixed for this LM loop.
-        // Only chain extremities get the occupancy term (see `OccupancyTerm`): bones without
-        // children, and bones leaving a free root.
+        // Which bones carry the occupancy term: see `OccupancyTerm`.
         let t = self.world.template.clone();
-        let tips: Vec<usize> = energy_bones
+        let trunk = trunk_bones(&t);
+        let occupied: Vec<usize> = energy_bones
             .iter()
             .copied()
             .filter(|&b| {
-                t.bones[b].children.is_empty() || (self.free_root && t.bones[b].parent.is_none())
+                trunk[b]
+                    || t.bones[b].children.is_empty()
+                    || (self.free_root && t.bones[b].parent.is_none())
             })
             .collect();
         let weights: Vec<f64> = {
             let bones = self.world.bones();
             let total_area: f64 = bones.iter().map(|b| b.area() as f64).sum();
             let density = self.assignment.len() as f64 / total_area.max(1e-30);
-            tips.iter()
+            occupied
+                .iter()
                 .map(|&b| {
                     (density * bones[b].area() as f64 / OCCUPANCY_SAMPLES as f64)
                         .max(1.0)
@@ -332,10 +335,10 @@ impl<'p> Solver<'p> {
                     bones: energy_bones,
                     occupancy: match (
                         &self.tree,
-                        self.settings.occupancy && !self.calibrating && !tips.is_empty(),
+                        self.settings.occupancy && !self.calibrating && !occupied.is_empty(),
                     ) {
                         (Some(tree), true) => Some(OccupancyTerm {
-                            bones: tips.clone(),
+                            bones: occupied.clone(),
                             weights: weights.clone(),
                             tree,
                             positions: &self.tree_points,
@@ -989,6 +992,31 @@ impl Solver<'_> {
     pub fn seed_chain(&mut self, chain: &[usize], trusted: &[bool]) -> Result<(), Cancelled> {
         self.seed_chains(&[chain], trusted)
     }
+}
+
+/// The **trunk** bones of a template: the root block's bones and every bone of a chain from
+/// which another chain hangs (the human's spine, neck and head, from whose thorax the arms
+/// hang), followers included. A trunk bone carries the occupancy term everywhere, not only at
+/// a chain's tip (see [`super::lm::OccupancyTerm`]).
+pub fn trunk_bones(t: &crate::anatomy::Template) -> Vec<bool> {
+    let chain_of = |b: usize| -> Option<usize> {
+        match t.bones[b].kind {
+            BoneKind::Follower { leader, .. } => t.bones[leader].chain.map(|c| c.0),
+            _ => t.bones[b].chain.map(|c| c.0),
+        }
+    };
+    let mut carries = vec![false; t.chains.len()];
+    for def in &t.bones {
+        if let (Some(p), Some((c, _))) = (def.parent, def.chain)
+            && let Some(pc) = chain_of(p)
+            && pc != c
+        {
+            carries[pc] = true;
+        }
+    }
+    (0..t.bones.len())
+        .map(|b| t.bones[b].kind == BoneKind::Block || chain_of(b).is_some_and(|c| carries[c]))
+        .collect()
 }
 
 /// The largest extent of a template's rest pose, radii included (template units).
