@@ -133,6 +133,8 @@ pub struct Solver<'p> {
     pub spacing: f32,
     /// Anchor of the root may move (chains whose first joint is free, e.g. the papers' chain).
     pub free_root: bool,
+    /// The template's trunk bones ([`trunk_bones`]), which carry the occupancy term.
+    trunk: Vec<bool>,
     pause: Option<&'p mut dyn Pause>,
 }
 
@@ -146,6 +148,7 @@ impl<'p> Solver<'p> {
         pause: &'p mut dyn Pause,
     ) -> Self {
         let classes = RadiusClasses::new(&world.template);
+        let trunk = trunk_bones(&world.template);
         let limits = Limits::new(&world, scale);
         let calibration_limits = Limits::with_length_range(&world, scale, 0.75, 1.33);
         let n = world.template.bones.len();
@@ -172,6 +175,7 @@ impl<'p> Solver<'p> {
             activity: Activity::default(),
             units: 0,
             free_root: false,
+            trunk,
             tree,
             tree_points,
             spacing,
@@ -262,12 +266,11 @@ impl<'p> Solver<'p> {
         // Occupancy weights (see `OccupancyTerm`), fixed for this LM loop.
         // Which bones carry the occupancy term: see `OccupancyTerm`.
         let t = self.world.template.clone();
-        let trunk = trunk_bones(&t);
         let occupied: Vec<usize> = energy_bones
             .iter()
             .copied()
             .filter(|&b| {
-                trunk[b]
+                self.trunk[b]
                     || t.bones[b].children.is_empty()
                     || (self.free_root && t.bones[b].parent.is_none())
             })
