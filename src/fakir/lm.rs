@@ -238,7 +238,7 @@ pub struct EnergyTerms<'a> {
     /// Optional occupancy term (model → data).
     pub occupancy: Option<OccupancyTerm<'a>>,
     /// Optional joint-range prior.
-    pub prior: Option<RangePrior>,
+    pub prior: Option<&'a RangePrior>,
 }
 
 /// The joint-range prior (our addition): a bone whose direction relative to its parent leaves
@@ -327,9 +327,9 @@ impl RangePrior {
 /// carry at the statue's average density, so a bone fully off the data costs like that many
 /// points at that distance.
 pub struct OccupancyTerm<'a> {
-    pub bones: Vec<usize>,
+    pub bones: &'a [usize],
     /// `weight` of each bone's samples (same order as `bones`).
-    pub weights: Vec<f64>,
+    pub weights: &'a [f64],
     pub tree: &'a kiddo::ImmutableKdTree<f32, 3>,
     pub positions: &'a [Vec3],
     /// Distance under which a sample counts as lying on the data.

@@ -329,7 +329,7 @@ impl<'p> Solver<'p> {
             }
         });
         // The energy terms borrow the solver, which a work unit needs whole: they are built
-        // afresh around each unit (cheap: references and a few small vectors).
+        // afresh around each unit (references only, no allocation).
         macro_rules! terms {
             () => {
                 EnergyTerms {
@@ -341,15 +341,15 @@ impl<'p> Solver<'p> {
                         self.settings.occupancy && !self.calibrating && !occupied.is_empty(),
                     ) {
                         (Some(tree), true) => Some(OccupancyTerm {
-                            bones: occupied.clone(),
-                            weights: weights.clone(),
+                            bones: &occupied,
+                            weights: &weights,
                             tree,
                             positions: &self.tree_points,
                             slack: 2.0 * self.spacing,
                         }),
                         _ => None,
                     },
-                    prior: prior.clone(),
+                    prior: prior.as_ref(),
                 }
             };
         }
