@@ -253,6 +253,14 @@ impl Default for SceneMargins {
     }
 }
 
+/// The logical size of the screen: the primary window's, else the configured window size.
+pub fn screen_size(window: Option<&bevy::window::Window>, cfg: &KioskConfig) -> Vec2 {
+    match window {
+        Some(w) => Vec2::new(w.width(), w.height()),
+        None => Vec2::new(cfg.window.width as f32, cfg.window.height as f32),
+    }
+}
+
 /// A visitor asked for a pose (by name, from the pose strip or attract mode).
 #[derive(Message, Clone, Debug)]
 pub struct PoseRequested(pub String);

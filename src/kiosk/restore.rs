@@ -71,7 +71,7 @@ use super::statue::{Pending, load, write_cache};
 use super::ui::{self, Look, UiFont};
 use super::{
     ActiveStatue, CurrentPose, FittedSkeleton, KioskSet, PoseAnimation, ResetRequested, Selection,
-    Settings, SkinnedPoints, Statue, StatueBinding, StatueCloud, StatueState,
+    Settings, SkinnedPoints, Statue, StatueBinding, StatueCloud, StatueState, screen_size,
 };
 use crate::anatomy::pose::ease;
 use crate::anatomy::{Skeleton, Template};
@@ -622,14 +622,6 @@ pub mod zones {
         let mut v = vec![PANEL, CLOSE, STRIP, UNDO];
         v.extend((0..64).map(|i| ENTRY + i));
         v
-    }
-}
-
-/// The logical size of the screen: the primary window's, else the configured window size.
-pub fn screen_size(window: Option<&Window>, cfg: &KioskConfig) -> Vec2 {
-    match window {
-        Some(w) => Vec2::new(w.width(), w.height()),
-        None => Vec2::new(cfg.window.width as f32, cfg.window.height as f32),
     }
 }
 

@@ -300,7 +300,7 @@ fn finish_loading(
                 };
             }
             Ok(loaded) => {
-                let screen = super::restore::screen_size(windows.iter().next(), &settings.0);
+                let screen = super::screen_size(windows.iter().next(), &settings.0);
                 frame_camera(&mut camera, &loaded.cloud, screen, *margins);
                 framing.0 = Some((screen, *margins));
                 let cloud = loaded.cloud.clone();
@@ -364,7 +364,7 @@ fn reframe_camera(
     else {
         return;
     };
-    let now = super::restore::screen_size(windows.iter().next(), &settings.0);
+    let now = super::screen_size(windows.iter().next(), &settings.0);
     let moved = (now - screen).abs().max_element() > 2.0
         || (m.top - margins.top).abs() > 2.0
         || (m.bottom - margins.bottom).abs() > 2.0;
