@@ -763,3 +763,37 @@ fn trunk_bones_are_the_block_and_the_chains_limbs_hang_from() {
     let chain = pygmalion::synth::chain_template("c", &[40.0, 35.0], &[9.0, 8.0, 7.0]).unwrap();
     assert!(trunk_bones(&chain).iter().all(|b| !b));
 }
+
+#[test]
+fn a_rescaled_candidate_keeps_its_orientation_and_scales_about_the_pivot() {
+    use pygmalion::anatomy::Template;
+    use pygmalion::fakir::init::{Candidate, rescaled};
+    use std::sync::Arc;
+    let t = Arc::new(Template::builtin("human").unwrap());
+    let q = Quat::from_axis_angle(Vec3::new(1.0, 2.0, -0.5).normalize(), 0.7);
+    let root = Vec3::new(0.3, 1.1, -0.4);
+    let c = Candidate {
+        skeleton: Skeleton::rest_placed(t.clone(), root, q, 1.6),
+        scale: 1.6,
+    };
+    let pivot = Vec3::new(0.1, 1.4, 0.2);
+    let r = rescaled(&c, pivot, 0.88);
+    assert!((r.scale - 1.6 * 0.88).abs() < 1e-6);
+    assert!(r.skeleton.root_rotation.dot(q).abs() > 1.0 - 1e-6);
+    // The root moves along the line from the pivot, to 0.88 of its distance.
+    let expected = pivot + (root - pivot) * 0.88;
+    assert!((r.skeleton.root_position - expected).length() < 1e-6);
+    // Every bone is 0.88 times as long and as thick, and points the same way.
+    let (a, b) = (c.skeleton.pose(), r.skeleton.pose());
+    for (x, y) in a.bones.iter().zip(&b.bones) {
+        assert!((y.length() - 0.88 * x.length()).abs() < 1e-5);
+        assert!((y.r1 - 0.88 * x.r1).abs() < 1e-5 && (y.r2 - 0.88 * x.r2).abs() < 1e-5);
+        if x.length() > 1e-6 {
+            let (dx, dy) = ((x.c2 - x.c1).normalize(), (y.c2 - y.c1).normalize());
+            assert!(dx.dot(dy) > 1.0 - 1e-5);
+        }
+    }
+    // With the anchor as the pivot, the root stays on the anchor.
+    let anchored = rescaled(&c, root, 1.12);
+    assert!((anchored.skeleton.root_position - root).length() < 1e-6);
+}

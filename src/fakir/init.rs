@@ -27,6 +27,14 @@
 //!    and elbows tell), which would swap left and right. Among the full registrations whose
 //!    two-sided score is within 50% of the best, the one whose pose lies least outside the
 //!    template's joint ranges ([`implausibility`]) wins.
+//! 7. **Scale restarts** (our choice): the extent along the body axis is a crude scale —
+//!    raised arms lengthen it, a crouch shortens it — and the trunk (pelvis block and spine)
+//!    settles in the minimum nearest its start, which neither the chain passes nor the limb
+//!    seeding leave. The chosen finalist's orientation is therefore registered again from
+//!    `rescales` (default ×0.88 and ×1.12) of its scale ([`rescaled`]), and the lowest
+//!    two-sided score wins (see [`super::registration`]). They start from the orientation
+//!    already chosen, so they do not reopen the front/back question: started from the best
+//!    short candidate instead, a backwards fit at another scale won on two statues of 32.
 
 use crate::anatomy::{Skeleton, Template};
 use crate::geometry::pca::{Pca, pca};
@@ -121,6 +129,19 @@ pub fn candidates(t: &Arc<Template>, points: &[Vec3], init: &Init) -> Vec<Candid
             }
         })
         .collect()
+}
+
+/// `c` placed again at `f` times its scale, with the same orientation: its root moves away
+/// from (or towards) `pivot` by `f` — the cloud's centroid, which the automatic placement
+/// maps the template's centroid to, or the given anchor, which then stays where it is.
+/// Used for the registration's scale restarts (see [`super::registration`]).
+pub fn rescaled(c: &Candidate, pivot: Vec3, f: f32) -> Candidate {
+    let s = &c.skeleton;
+    let root = pivot + (s.root_position - pivot) * f;
+    Candidate {
+        skeleton: Skeleton::rest_placed(s.template.clone(), root, s.root_rotation, c.scale * f),
+        scale: c.scale * f,
+    }
 }
 
 /// Rotations sending the template's major principal axis onto the cloud's, either way, each

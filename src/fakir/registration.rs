@@ -9,7 +9,10 @@
 //!    (default 5) best candidates; the lowest two-sided score (mean distance + occupancy,
 //!    [`super::solver::Solver::occupancy`]) is kept, near-ties going to the most plausible
 //!    pose ([`super::init::implausibility`]).
-//! 3. **Level 1** (clouds larger than the subsample): the assignment is redone on all points
+//! 3. **Scale restarts** ([`super::init`], step 7): the chosen finalist's orientation is
+//!    registered again on the same points from each of `rescales` times its scale; the
+//!    lowest two-sided score among these and the finalist wins (ties to the finalist).
+//! 4. **Level 1** (clouds larger than the subsample): the assignment is redone on all points
 //!    and the schedule refines the skeleton (`final_iterations` whole-skeleton iterations).
 //!
 //! ## Incremental by design
@@ -23,7 +26,7 @@
 //! skeleton, bit for bit, as an uninterrupted run on any number of threads.
 
 use super::assign::{AssignParams, Assignment};
-use super::init::{Candidate, Init, candidates};
+use super::init::{Candidate, Init, candidates, rescaled};
 use super::schedule::{ScheduleSettings, register_skeleton};
 use super::solver::{Activity, Cancelled, NoPause, Pause, Solver, SolverSettings, template_extent};
 use super::world::WorldSkeleton;
@@ -50,6 +53,8 @@ pub struct RegistrationOptions {
     pub final_iterations: usize,
     /// Candidates (best short registrations first) that get a full level-0 registration.
     pub finalists: usize,
+    /// Scale factors of the scale restarts (empty: none; see [`super::init`], step 7).
+    pub rescales: Vec<f32>,
     /// Seed of the subsampling.
     pub seed: u64,
     pub solver: SolverSettings,
@@ -68,6 +73,7 @@ impl Default for RegistrationOptions {
             init_subsample: 1500,
             final_iterations: 1,
             finalists: 5,
+            rescales: vec![0.88, 1.12],
             seed: 7,
             solver: SolverSettings::default(),
             schedule: ScheduleSettings::default(),
@@ -281,40 +287,65 @@ pub fn register(
             .then(a.cmp(&b))
     });
     order.truncate(opts.finalists.max(1));
-    let mut finals: Vec<(f64, f64, usize, WorldSkeleton, u64, usize)> = Vec::new();
+    // Without a choice of placement (a given skeleton) there is nothing to restart.
+    let rescales: &[f32] = if !matches!(opts.init, Init::Given(_)) {
+        &opts.rescales
+    } else {
+        &[]
+    };
+    let runs = order.len() + rescales.len();
+    let full = FullRun {
+        positions,
+        normals: &normals,
+        idx: &level0,
+        nb,
+        params,
+        opts,
+        free_root,
+    };
+    let mut finals: Vec<FullFit> = Vec::new();
     for (j, &ci) in order.iter().enumerate() {
-        let c = &cands[ci];
-        let a0 = assignment_of(positions, &normals, &level0, nb, params);
-        let mut s = Solver::new(
-            WorldSkeleton::from_skeleton(&c.skeleton),
-            a0,
-            c.scale,
-            opts.solver.clone(),
-            pause,
-        );
-        s.free_root = free_root;
-        s.activity.fraction = fraction;
-        s.activity.span = span(finalists_start, level1_start, j, order.len());
-        let iterations = register_skeleton(&mut s, &opts.schedule, true).map_err(cancelled)?;
-        fraction = s.activity.fraction;
-        let score = s.mean_distance() + s.occupancy();
-        let implausible = super::init::implausibility(&s.world.to_skeleton());
-        finals.push((score, implausible, ci, s.world.clone(), s.units, iterations));
+        let sp = span(finalists_start, level1_start, j, runs);
+        finals.push(full.run(ci, &cands[ci], pause, &mut fraction, sp)?);
     }
     // Near-ties (within 50% of the best score) are decided by anatomy (see `init`): a
     // well-fitted figure facing the right way keeps its knees, elbows and feet in range.
-    let best_score = finals.iter().map(|f| f.0).fold(f64::INFINITY, f64::min);
+    let best_score = finals.iter().map(|f| f.score).fold(f64::INFINITY, f64::min);
     let pick = finals
         .iter()
         .enumerate()
-        .filter(|(_, f)| f.0 <= 1.5 * best_score)
-        .min_by(|(_, a), (_, b)| a.1.total_cmp(&b.1).then(a.0.total_cmp(&b.0)))
+        .filter(|(_, f)| f.score <= 1.5 * best_score)
+        .min_by(|(_, a), (_, b)| {
+            a.implausible
+                .total_cmp(&b.implausible)
+                .then(a.score.total_cmp(&b.score))
+        })
         .map(|(i, _)| i)
         .expect("at least one finalist");
-    let (_, _, chosen, world, units0, mut iterations) = finals.swap_remove(pick);
-    let start = &cands[chosen];
+    let mut best = finals.swap_remove(pick);
+    let chosen = best.candidate;
+    // Scale restarts of the chosen orientation (see `init`, step 7): the lowest score wins.
+    let pivot = match &opts.init {
+        Init::Anchor { anchor, .. } => *anchor,
+        _ => centroid(&level0_points),
+    };
+    for (j, &f) in rescales.iter().enumerate() {
+        let c = rescaled(&cands[chosen], pivot, f);
+        let sp = span(finalists_start, level1_start, order.len() + j, runs);
+        let r = full.run(chosen, &c, pause, &mut fraction, sp)?;
+        if r.score < best.score {
+            best = r;
+        }
+    }
+    let FullFit {
+        world,
+        units: units0,
+        mut iterations,
+        scale,
+        ..
+    } = best;
     let a0 = assignment_of(positions, &normals, &level0, nb, params);
-    let mut s = Solver::new(world, a0, start.scale, opts.solver.clone(), pause);
+    let mut s = Solver::new(world, a0, scale, opts.solver.clone(), pause);
     s.free_root = free_root;
     s.units = units0;
     s.activity.fraction = fraction;
@@ -352,6 +383,74 @@ pub fn register(
         candidate: chosen,
         candidate_distances: distances,
     })
+}
+
+/// Mean of `points` (the origin for none).
+fn centroid(points: &[Vec3]) -> Vec3 {
+    let sum = points.iter().fold(Vec3::ZERO, |a, p| a + *p);
+    sum / points.len().max(1) as f32
+}
+
+/// What a full level-0 registration needs besides its start.
+struct FullRun<'a> {
+    positions: &'a [Vec3],
+    normals: &'a [Vec3],
+    idx: &'a [u32],
+    nb: usize,
+    params: AssignParams,
+    opts: &'a RegistrationOptions,
+    free_root: bool,
+}
+
+/// The outcome of a full level-0 registration.
+struct FullFit {
+    /// Two-sided score (mean distance + occupancy).
+    score: f64,
+    /// [`super::init::implausibility`] of the pose.
+    implausible: f64,
+    /// Index of the candidate orientation it started from.
+    candidate: usize,
+    /// Scale of its start (template units → statue units).
+    scale: f32,
+    world: WorldSkeleton,
+    units: u64,
+    iterations: usize,
+}
+
+impl FullRun<'_> {
+    /// Registers the whole skeleton from `c` (candidate `ci`, or a restart of it), with its
+    /// progress in `span`.
+    fn run(
+        &self,
+        ci: usize,
+        c: &Candidate,
+        pause: &mut dyn Pause,
+        fraction: &mut f32,
+        span: (f32, f32),
+    ) -> Result<FullFit> {
+        let a0 = assignment_of(self.positions, self.normals, self.idx, self.nb, self.params);
+        let mut s = Solver::new(
+            WorldSkeleton::from_skeleton(&c.skeleton),
+            a0,
+            c.scale,
+            self.opts.solver.clone(),
+            pause,
+        );
+        s.free_root = self.free_root;
+        s.activity.fraction = *fraction;
+        s.activity.span = span;
+        let iterations = register_skeleton(&mut s, &self.opts.schedule, true).map_err(cancelled)?;
+        *fraction = s.activity.fraction;
+        Ok(FullFit {
+            score: s.mean_distance() + s.occupancy(),
+            implausible: super::init::implausibility(&s.world.to_skeleton()),
+            candidate: ci,
+            scale: c.scale,
+            world: s.world.clone(),
+            units: s.units,
+            iterations,
+        })
+    }
 }
 
 fn cancelled(_: Cancelled) -> Error {
