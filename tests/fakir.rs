@@ -704,11 +704,12 @@ fn posed_statues_registration() {
         errors.push(err);
     }
     // A regression guard, not the issue's target (90% of statues under 2%, measured over 32
-    // statues in the issue notes): no gross failure, and at least half under 2%. Measured
-    // when written: 0.65, 0.80, 1.89, 1.43, 6.19, 6.39%.
-    assert!(errors.iter().all(|e| *e < 0.10), "joint errors {errors:?}");
+    // statues in the issue notes): no failure beyond 5%, and at least five of six under 2%.
+    // Measured with the scale restarts: 0.65, 0.80, 1.79, 1.68, 1.15, 0.73% (without them:
+    // 0.65, 0.80, 1.89, 1.43, 6.19, 6.39%).
+    assert!(errors.iter().all(|e| *e < 0.05), "joint errors {errors:?}");
     let good = errors.iter().filter(|e| **e < 0.02).count();
-    assert!(good >= 3, "only {good} of 6 under 2%: {errors:?}");
+    assert!(good >= 5, "only {good} of 6 under 2%: {errors:?}");
 }
 
 /// Joint error with the fit's left and right exchanged.
