@@ -87,8 +87,9 @@ impl Default for RegistrationOptions {
 #[derive(Clone, Debug, Default)]
 pub struct Progress {
     /// What runs now; `activity.fraction` estimates the share done (0.15 for the candidates'
-    /// short registrations, up to 0.85 for the finalists, the rest for level 1; each part
-    /// advances with its whole-skeleton iterations and chains), never decreasing.
+    /// short registrations, up to 0.85 for the finalists and the scale restarts, the rest for
+    /// level 1; each part advances with its whole-skeleton iterations and chains), never
+    /// decreasing.
     pub activity: Activity,
     /// Work units done so far.
     pub units: u64,
