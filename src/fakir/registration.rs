@@ -13,7 +13,9 @@
 //!    registered again on the same points from each of `rescales` times its scale; the
 //!    lowest two-sided score among these and the finalist wins (ties to the finalist).
 //! 4. **Level 1** (clouds larger than the subsample): the assignment is redone on all points
-//!    and the schedule refines the skeleton (`final_iterations` whole-skeleton iterations).
+//!    and the schedule refines the skeleton (`final_iterations` whole-skeleton iterations,
+//!    default 2: over 32 synthetic statues a second one lowered the mean joint error from
+//!    3.54% to 3.47% of the height for 2% more time).
 //!
 //! ## Incremental by design
 //! The algorithm is written as plain sequential code whose elementary steps (one LM iteration
@@ -71,7 +73,7 @@ impl Default for RegistrationOptions {
             init: Init::Auto,
             subsample: 8000,
             init_subsample: 1500,
-            final_iterations: 1,
+            final_iterations: 2,
             finalists: 5,
             rescales: vec![0.88, 1.12],
             seed: 7,
