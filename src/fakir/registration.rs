@@ -353,8 +353,9 @@ pub fn register(
     s.units = units0;
     s.activity.fraction = fraction;
     s.activity.span = (level1_start, 1.0);
-    s.refresh().map_err(cancelled)?;
-    // Level 1: all points.
+    // Level 1: all points. (No refresh on the level-0 points first: level 1 replaces the
+    // assignment and its schedule refreshes it whole, and without a level 1 the refresh below
+    // is the only one needed.)
     if level0.len() < n {
         s.activity.level = 1;
         let all: Vec<u32> = (0..n as u32).collect();
