@@ -264,6 +264,139 @@ fn lm_gradient_matches_finite_differences_of_the_energy() {
     }
 }
 
+/// The LM sums cut into work-unit slices (`NormalAccumulator`, `EnergyAccumulator`) are the
+/// unsliced sums bit for bit, whatever the slice size, so pausing between slices cannot
+/// change a registration.
+#[test]
+fn sliced_lm_sums_equal_the_unsliced_sums_bit_for_bit() {
+    use pygmalion::fakir::assign::CHUNK;
+    use pygmalion::fakir::lm::{
+        EnergyAccumulator, EnergyTerms, NormalAccumulator, Param, apply, normal_equations,
+    };
+    use pygmalion::fakir::world::RadiusClasses;
+    // About 7500 points per bone: several chunks each.
+    let s = chain4(30_000, 4, 0.5, 0.0, vec![]).unwrap();
+    let mut w = WorldSkeleton::from_skeleton(&s.truth);
+    let classes = RadiusClasses::new(&s.truth.template);
+    apply(&mut w, &classes, &Param::PairRotate { a: 1, b: 2 }, 0.2);
+    let mut asg = assignment_of(&s, 0.28);
+    let prepared: Vec<_> = w.bones().iter().map(|b| b.prepare()).collect();
+    asg.refresh(&prepared, &[0, 1, 2, 3]);
+    let members = asg.members();
+    assert!(
+        members.iter().all(|m| m.len() > 2 * CHUNK),
+        "{:?}",
+        members.iter().map(Vec::len).collect::<Vec<_>>()
+    );
+    let bones = [1usize, 2, 3];
+    let terms = EnergyTerms {
+        assignment: &asg,
+        members: &members,
+        bones: &bones,
+        occupancy: None,
+        prior: None,
+    };
+    let params = [
+        Param::PairRotate { a: 1, b: 2 },
+        Param::PairLength {
+            a: 1,
+            b: 2,
+            first: true,
+        },
+    ];
+    let whole = normal_equations(&w, &classes, &params, &terms, 140.0);
+    let energy = terms.energy(&w.bones());
+    for budget in [1, CHUNK, 3 * CHUNK, 5_000] {
+        let mut acc = NormalAccumulator::new(&w, &classes, &params, &terms, 140.0);
+        let mut slices = 1;
+        while !acc.feed(&terms, budget) {
+            slices += 1;
+        }
+        let sliced = acc.finish(&w, &terms);
+        assert!(slices >= 3, "budget {budget}: {slices} slices");
+        assert_eq!(
+            sliced.0.map(f64::to_bits),
+            whole.0.map(f64::to_bits),
+            "JᵀJ, budget {budget}"
+        );
+        assert_eq!(
+            sliced.1.map(f64::to_bits),
+            whole.1.map(f64::to_bits),
+            "Jᵀr, budget {budget}"
+        );
+        assert_eq!(
+            sliced.2.to_bits(),
+            whole.2.to_bits(),
+            "energy, budget {budget}"
+        );
+        let mut e = EnergyAccumulator::new(w.bones());
+        while !e.feed(&terms, budget) {}
+        assert_eq!(
+            e.data.to_bits(),
+            energy.to_bits(),
+            "data energy, budget {budget}"
+        );
+        assert_eq!(
+            e.finish(&terms, &w).to_bits(),
+            terms.total_energy(&w).to_bits()
+        );
+    }
+    // The unsliced energy is the plain sum of squared residuals (to rounding).
+    let direct: f64 = bones
+        .iter()
+        .flat_map(|&b| {
+            let pb = w.bones()[b].prepare();
+            let asg = &asg;
+            members[b].iter().map(move |&i| {
+                let r = pb
+                    .project_constrained(asg.positions[i as usize], asg.normals[i as usize])
+                    .residual as f64;
+                r * r
+            })
+        })
+        .sum();
+    assert!(
+        (direct - energy).abs() <= 1e-9 * direct,
+        "{direct} vs {energy}"
+    );
+}
+
+/// An assignment built in slices (`with_capacity` + `push`, as level 1 builds its 100k-point
+/// one across work units) is the one built at once.
+#[test]
+fn an_assignment_built_in_slices_equals_one_built_at_once() {
+    let s = chain4(5_000, 4, 0.5, 0.0, vec![]).unwrap();
+    let n = s.cloud.len();
+    let whole = assignment_of(&s, 0.28);
+    let normals = s.cloud.normals.clone().unwrap();
+    let mut sliced = Assignment::with_capacity(n, 4, whole.params);
+    for start in (0..n).step_by(1_234) {
+        let end = (start + 1_234).min(n);
+        let source: Vec<u32> = (start as u32..end as u32).collect();
+        sliced.push(
+            &s.cloud.positions[start..end],
+            &normals[start..end],
+            &source,
+        );
+    }
+    assert_eq!(sliced.len(), n);
+    assert_eq!(
+        (&sliced.positions, &sliced.normals, &sliced.source),
+        (&whole.positions, &whole.normals, &whole.source)
+    );
+    let prepared: Vec<_> = s.truth.pose().bones.iter().map(|b| b.prepare()).collect();
+    let (mut a, mut b) = (whole, sliced);
+    a.refresh(&prepared, &[0, 1, 2, 3]);
+    b.refresh(&prepared, &[0, 1, 2, 3]);
+    assert_eq!(a.label, b.label);
+    assert!(a.label.iter().any(|&l| l == 3) && a.label.iter().any(|&l| l == 0));
+    for i in 0..n {
+        for bone in 0..4 {
+            assert_eq!(a.distance(bone, i).to_bits(), b.distance(bone, i).to_bits());
+        }
+    }
+}
+
 /// Mean joint error of a fitted skeleton against the truth, as a fraction of `height`.
 pub fn joint_error(fit: &Skeleton, truth: &Skeleton, height: f32) -> f32 {
     fit.mean_joint_distance(truth) / height

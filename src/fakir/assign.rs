@@ -70,18 +70,48 @@ impl Assignment {
         params: AssignParams,
     ) -> Self {
         let n = positions.len();
+        let mut a = Assignment::with_capacity(0, n_bones, params);
+        a.dist = vec![f32::INFINITY; n * n_bones];
+        a.cone = vec![false; n * n_bones];
+        a.bound = vec![false; n * n_bones];
+        a.label = vec![0; n];
+        (a.positions, a.normals, a.source) = (positions, normals, source);
+        a
+    }
+
+    /// An assignment without points yet, with room for `capacity` of them: [`Assignment::push`]
+    /// adds them in bounded steps (a 100k-point assignment holds millions of distances).
+    pub fn with_capacity(capacity: usize, n_bones: usize, params: AssignParams) -> Self {
         Assignment {
-            positions,
-            normals,
-            source,
+            positions: Vec::with_capacity(capacity),
+            normals: Vec::with_capacity(capacity),
+            source: Vec::with_capacity(capacity),
             n_bones,
-            dist: vec![f32::INFINITY; n * n_bones],
-            cone: vec![false; n * n_bones],
-            bound: vec![false; n * n_bones],
-            label: vec![0; n],
+            dist: Vec::with_capacity(capacity * n_bones),
+            cone: Vec::with_capacity(capacity * n_bones),
+            bound: Vec::with_capacity(capacity * n_bones),
+            label: Vec::with_capacity(capacity),
             enabled: vec![true; n_bones],
             params,
         }
+    }
+
+    /// Appends points (positions, normals and indices in the full cloud, of equal lengths),
+    /// their distances at infinity and labels 0 until the next refresh.
+    pub fn push(&mut self, positions: &[Vec3], normals: &[Vec3], source: &[u32]) {
+        let k = positions.len();
+        assert!(
+            normals.len() == k && source.len() == k,
+            "unequal point arrays"
+        );
+        self.positions.extend_from_slice(positions);
+        self.normals.extend_from_slice(normals);
+        self.source.extend_from_slice(source);
+        let rows = (self.len()) * self.n_bones;
+        self.dist.resize(rows, f32::INFINITY);
+        self.cone.resize(rows, false);
+        self.bound.resize(rows, false);
+        self.label.resize(self.len(), 0);
     }
 
     /// Number of points.

@@ -439,12 +439,108 @@ impl EnergyTerms<'_> {
 
     /// Energy (sum of squared residuals) for the given world bones, in a fixed order.
     pub fn energy(&self, bones: &[Bone]) -> f64 {
-        let mut total = 0.0f64;
-        for &b in self.bones {
-            let pb = bones[b].prepare();
-            let idx = &self.members[b];
-            let a = self.assignment;
-            let parts: Vec<f64> = idx
+        let mut acc = EnergyAccumulator::new(bones.to_vec());
+        while !acc.feed(self, usize::MAX) {}
+        acc.data
+    }
+
+    /// Data energy plus the occupancy term, for a world skeleton.
+    pub fn total_energy(&self, w: &WorldSkeleton) -> f64 {
+        self.energy(&w.bones())
+            + self.occupancy.as_ref().map_or(0.0, |c| c.energy(w))
+            + self.prior.as_ref().map_or(0.0, |p| p.energy(w))
+    }
+}
+
+/// Points of a slice of a sliced accumulation over an energy's members ([`NormalAccumulator`],
+/// [`EnergyAccumulator`]): the registration makes each slice a work unit of its own, so no
+/// unit projects more than this many points, however many points the fitted bones carry
+/// (tens of thousands on a 100k-point level 1). A whole number of chunks, so slicing keeps
+/// the chunks, and therefore the sums, of an unsliced pass.
+pub const SLICE_POINTS: usize = 4 * CHUNK;
+
+/// Where a sliced pass over the members of an energy's bones stands: bone `bone` of the
+/// energy's bones, its members from `offset` on (a multiple of [`CHUNK`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct Cursor {
+    bone: usize,
+    offset: usize,
+}
+
+impl Cursor {
+    /// Visits the next runs of members, at most `budget` points rounded up to whole chunks,
+    /// in the fixed order (bone by bone, each bone's members in order): `f(k, run, last)` gets
+    /// the position `k` in `terms.bones`, the members' run, and whether it ends the bone's
+    /// members. Returns true when every member has been visited.
+    fn advance(
+        &mut self,
+        terms: &EnergyTerms,
+        budget: usize,
+        mut f: impl FnMut(usize, &[u32], bool),
+    ) -> bool {
+        let mut chunks = budget.div_ceil(CHUNK).max(1);
+        while self.bone < terms.bones.len() {
+            if chunks == 0 {
+                return false;
+            }
+            let members = &terms.members[terms.bones[self.bone]];
+            let end = members
+                .len()
+                .min(self.offset.saturating_add(chunks.saturating_mul(CHUNK)));
+            let last = end == members.len();
+            f(self.bone, &members[self.offset.min(end)..end], last);
+            chunks -= (end - self.offset.min(end)).div_ceil(CHUNK);
+            if last {
+                self.bone += 1;
+                self.offset = 0;
+            } else {
+                self.offset = end;
+            }
+        }
+        true
+    }
+}
+
+/// The data energy of [`EnergyTerms`] for given bones, summed slice by slice
+/// ([`SLICE_POINTS`]) with exactly the sums of an unsliced pass: per bone, the chunks' partial
+/// sums in order; then the bones in order.
+pub struct EnergyAccumulator {
+    bones: Vec<Bone>,
+    prepared: Option<(usize, PreparedBone)>,
+    cursor: Cursor,
+    bone_sum: f64,
+    /// The data energy summed so far (all of it once [`EnergyAccumulator::feed`] returned true).
+    pub data: f64,
+}
+
+impl EnergyAccumulator {
+    /// An accumulation for the world bones `bones` (indexed like the template's).
+    pub fn new(bones: Vec<Bone>) -> Self {
+        EnergyAccumulator {
+            bones,
+            prepared: None,
+            cursor: Cursor::default(),
+            bone_sum: 0.0,
+            data: 0.0,
+        }
+    }
+
+    /// Adds the next `budget` points (whole chunks); true when every point is in.
+    pub fn feed(&mut self, terms: &EnergyTerms, budget: usize) -> bool {
+        let a = terms.assignment;
+        let (bones, prepared, bone_sum, data) = (
+            &self.bones,
+            &mut self.prepared,
+            &mut self.bone_sum,
+            &mut self.data,
+        );
+        self.cursor.advance(terms, budget, |k, run, last| {
+            let b = terms.bones[k];
+            if prepared.as_ref().is_none_or(|(x, _)| *x != k) {
+                *prepared = Some((k, bones[b].prepare()));
+            }
+            let pb = &prepared.as_ref().expect("prepared above").1;
+            let parts: Vec<f64> = run
                 .par_chunks(CHUNK)
                 .map(|chunk| {
                     chunk
@@ -458,16 +554,22 @@ impl EnergyTerms<'_> {
                         .sum::<f64>()
                 })
                 .collect();
-            total += parts.iter().sum::<f64>();
-        }
-        total
+            for p in parts {
+                *bone_sum += p;
+            }
+            if last {
+                *data += *bone_sum;
+                *bone_sum = 0.0;
+            }
+        })
     }
 
-    /// Data energy plus the occupancy term, for a world skeleton.
-    pub fn total_energy(&self, w: &WorldSkeleton) -> f64 {
-        self.energy(&w.bones())
-            + self.occupancy.as_ref().map_or(0.0, |c| c.energy(w))
-            + self.prior.as_ref().map_or(0.0, |p| p.energy(w))
+    /// The total energy (data, occupancy, prior) of the world skeleton `w` whose bones were
+    /// fed, once [`EnergyAccumulator::feed`] returned true.
+    pub fn finish(&self, terms: &EnergyTerms, w: &WorldSkeleton) -> f64 {
+        self.data
+            + terms.occupancy.as_ref().map_or(0.0, |c| c.energy(w))
+            + terms.prior.as_ref().map_or(0.0, |p| p.energy(w))
     }
 }
 
@@ -502,152 +604,208 @@ pub fn normal_equations(
     terms: &EnergyTerms,
     size: f32,
 ) -> NormalEquations {
-    let k = params.len();
-    assert!(k > 0 && k <= MAX_PARAMS);
-    let base_bones = w.bones();
-    let n_bones = base_bones.len();
-    // Geometry Jacobian by central differences of the forward kinematics.
-    let mut geo = vec![[GeoDeriv::default(); MAX_PARAMS]; n_bones];
-    let mut occ_deriv: Vec<Vec<Vec3>> = vec![Vec::new(); MAX_PARAMS];
-    let mut prior_deriv: Vec<Vec<f64>> = vec![Vec::new(); MAX_PARAMS];
-    for (j, p) in params.iter().enumerate() {
-        let h = fd_step(p, size);
-        let mut plus = w.clone();
-        apply(&mut plus, classes, p, h);
-        let mut minus = w.clone();
-        apply(&mut minus, classes, p, -h);
-        let (bp, bm) = (plus.bones(), minus.bones());
-        if let Some(occ) = &terms.occupancy {
-            let (sp, sm) = (occ.all_samples(&plus), occ.all_samples(&minus));
-            occ_deriv[j] = sp
-                .iter()
-                .zip(&sm)
-                .map(|(a, b)| (*a - *b) / (2.0 * h))
-                .collect();
-        }
-        if let Some(prior) = &terms.prior {
-            let (rp, rm) = (prior.residuals(&plus), prior.residuals(&minus));
-            prior_deriv[j] = rp
-                .iter()
-                .zip(&rm)
-                .map(|(a, b)| (a - b) / (2.0 * h as f64))
-                .collect();
-        }
-        for &b in terms.bones {
-            let inv = 1.0 / (2.0 * h);
-            geo[b][j] = GeoDeriv {
-                dc1: (bp[b].c1 - bm[b].c1) * inv,
-                dc2: (bp[b].c2 - bm[b].c2) * inv,
-                dr1: (bp[b].r1 - bm[b].r1) * inv,
-                dr2: (bp[b].r2 - bm[b].r2) * inv,
-            };
-        }
-    }
-    // Accumulate JᵀJ, Jᵀr and the energy over the members, in a fixed order.
-    let mut jtj = [0.0f64; MAX_PARAMS * MAX_PARAMS];
-    let mut jtr = [0.0f64; MAX_PARAMS];
-    let mut energy = 0.0f64;
-    let a = terms.assignment;
-    for &b in terms.bones {
-        let pb: PreparedBone = base_bones[b].prepare();
-        let g = &geo[b];
-        let parts: Vec<([f64; MAX_PARAMS * MAX_PARAMS], [f64; MAX_PARAMS], f64)> = terms.members[b]
-            .par_chunks(CHUNK)
-            .map(|chunk| {
-                let mut jtj = [0.0f64; MAX_PARAMS * MAX_PARAMS];
-                let mut jtr = [0.0f64; MAX_PARAMS];
-                let mut e = 0.0f64;
-                let mut row = [0.0f64; MAX_PARAMS];
-                for &i in chunk {
-                    let proj =
-                        pb.project_constrained(a.positions[i as usize], a.normals[i as usize]);
-                    let grad = proj.gradient();
-                    let r = proj.residual as f64;
-                    e += r * r;
-                    for j in 0..k {
-                        let d = &g[j];
-                        row[j] = (grad.dc1.dot(d.dc1)
-                            + grad.dc2.dot(d.dc2)
-                            + grad.dr1 * d.dr1
-                            + grad.dr2 * d.dr2) as f64;
-                    }
-                    for j in 0..k {
-                        jtr[j] += row[j] * r;
-                        for m in j..k {
-                            jtj[j * MAX_PARAMS + m] += row[j] * row[m];
-                        }
-                    }
-                }
-                (jtj, jtr, e)
-            })
-            .collect();
-        for (pj, pr, pe) in parts {
-            for x in 0..MAX_PARAMS * MAX_PARAMS {
-                jtj[x] += pj[x];
-            }
-            for x in 0..MAX_PARAMS {
-                jtr[x] += pr[x];
-            }
-            energy += pe;
-        }
-    }
-    if let Some(occ) = &terms.occupancy {
-        for (q, (r, e, wgt)) in occ.residuals(w).iter().enumerate() {
-            let mut row = [0.0f64; MAX_PARAMS];
-            for j in 0..k {
-                row[j] = wgt * e.dot(occ_deriv[j][q]) as f64;
-            }
-            energy += r * r;
-            for j in 0..k {
-                jtr[j] += row[j] * r;
-                for m in j..k {
-                    jtj[j * MAX_PARAMS + m] += row[j] * row[m];
-                }
-            }
-        }
-    }
-    if let Some(prior) = &terms.prior {
-        for (q, r) in prior.residuals(w).iter().enumerate() {
-            let mut row = [0.0f64; MAX_PARAMS];
-            for j in 0..k {
-                row[j] = prior_deriv[j][q];
-            }
-            energy += r * r;
-            for j in 0..k {
-                jtr[j] += row[j] * r;
-                for m in j..k {
-                    jtj[j * MAX_PARAMS + m] += row[j] * row[m];
-                }
-            }
-        }
-    }
-    (jtj, jtr, energy)
+    let mut acc = NormalAccumulator::new(w, classes, params, terms, size);
+    while !acc.feed(terms, usize::MAX) {}
+    acc.finish(w, terms)
 }
 
-/// One Levenberg–Marquardt iteration of `params` on the energy `terms`; `w` is updated when
-/// the step is accepted. `lambda` is the damping, adapted in place.
+/// [`normal_equations`] summed slice by slice ([`SLICE_POINTS`] points of the members at a
+/// time), with exactly the sums of an unsliced pass: `new` takes the geometry Jacobian,
+/// `feed` adds the members' rows in order, `finish` adds the occupancy and prior rows.
+pub struct NormalAccumulator {
+    k: usize,
+    bones: Vec<Bone>,
+    geo: Vec<[GeoDeriv; MAX_PARAMS]>,
+    occ_deriv: Vec<Vec<Vec3>>,
+    prior_deriv: Vec<Vec<f64>>,
+    prepared: Option<(usize, PreparedBone)>,
+    cursor: Cursor,
+    jtj: [f64; MAX_PARAMS * MAX_PARAMS],
+    jtr: [f64; MAX_PARAMS],
+    energy: f64,
+}
+
+impl NormalAccumulator {
+    /// Starts the normal equations of `params` at the state `w`: the derivatives of the bones
+    /// (and of the occupancy samples and prior residuals) with respect to each parameter.
+    pub fn new(
+        w: &WorldSkeleton,
+        classes: &RadiusClasses,
+        params: &[Param],
+        terms: &EnergyTerms,
+        size: f32,
+    ) -> Self {
+        let k = params.len();
+        assert!(k > 0 && k <= MAX_PARAMS);
+        let bones = w.bones();
+        // Geometry Jacobian by central differences of the forward kinematics.
+        let mut geo = vec![[GeoDeriv::default(); MAX_PARAMS]; bones.len()];
+        let mut occ_deriv: Vec<Vec<Vec3>> = vec![Vec::new(); MAX_PARAMS];
+        let mut prior_deriv: Vec<Vec<f64>> = vec![Vec::new(); MAX_PARAMS];
+        for (j, p) in params.iter().enumerate() {
+            let h = fd_step(p, size);
+            let mut plus = w.clone();
+            apply(&mut plus, classes, p, h);
+            let mut minus = w.clone();
+            apply(&mut minus, classes, p, -h);
+            let (bp, bm) = (plus.bones(), minus.bones());
+            if let Some(occ) = &terms.occupancy {
+                let (sp, sm) = (occ.all_samples(&plus), occ.all_samples(&minus));
+                occ_deriv[j] = sp
+                    .iter()
+                    .zip(&sm)
+                    .map(|(a, b)| (*a - *b) / (2.0 * h))
+                    .collect();
+            }
+            if let Some(prior) = &terms.prior {
+                let (rp, rm) = (prior.residuals(&plus), prior.residuals(&minus));
+                prior_deriv[j] = rp
+                    .iter()
+                    .zip(&rm)
+                    .map(|(a, b)| (a - b) / (2.0 * h as f64))
+                    .collect();
+            }
+            for &b in terms.bones {
+                let inv = 1.0 / (2.0 * h);
+                geo[b][j] = GeoDeriv {
+                    dc1: (bp[b].c1 - bm[b].c1) * inv,
+                    dc2: (bp[b].c2 - bm[b].c2) * inv,
+                    dr1: (bp[b].r1 - bm[b].r1) * inv,
+                    dr2: (bp[b].r2 - bm[b].r2) * inv,
+                };
+            }
+        }
+        NormalAccumulator {
+            k,
+            bones,
+            geo,
+            occ_deriv,
+            prior_deriv,
+            prepared: None,
+            cursor: Cursor::default(),
+            jtj: [0.0; MAX_PARAMS * MAX_PARAMS],
+            jtr: [0.0; MAX_PARAMS],
+            energy: 0.0,
+        }
+    }
+
+    /// Adds the rows of the next `budget` member points (whole chunks) to `JᵀJ`, `Jᵀr` and
+    /// the energy; true when every member is in.
+    pub fn feed(&mut self, terms: &EnergyTerms, budget: usize) -> bool {
+        let a = terms.assignment;
+        let k = self.k;
+        let (bones, geo, prepared, jtj, jtr, energy) = (
+            &self.bones,
+            &self.geo,
+            &mut self.prepared,
+            &mut self.jtj,
+            &mut self.jtr,
+            &mut self.energy,
+        );
+        self.cursor.advance(terms, budget, |pos, run, _| {
+            let b = terms.bones[pos];
+            if prepared.as_ref().is_none_or(|(x, _)| *x != pos) {
+                *prepared = Some((pos, bones[b].prepare()));
+            }
+            let pb = &prepared.as_ref().expect("prepared above").1;
+            let g = &geo[b];
+            let parts: Vec<([f64; MAX_PARAMS * MAX_PARAMS], [f64; MAX_PARAMS], f64)> = run
+                .par_chunks(CHUNK)
+                .map(|chunk| {
+                    let mut jtj = [0.0f64; MAX_PARAMS * MAX_PARAMS];
+                    let mut jtr = [0.0f64; MAX_PARAMS];
+                    let mut e = 0.0f64;
+                    let mut row = [0.0f64; MAX_PARAMS];
+                    for &i in chunk {
+                        let proj =
+                            pb.project_constrained(a.positions[i as usize], a.normals[i as usize]);
+                        let grad = proj.gradient();
+                        let r = proj.residual as f64;
+                        e += r * r;
+                        for j in 0..k {
+                            let d = &g[j];
+                            row[j] = (grad.dc1.dot(d.dc1)
+                                + grad.dc2.dot(d.dc2)
+                                + grad.dr1 * d.dr1
+                                + grad.dr2 * d.dr2) as f64;
+                        }
+                        for j in 0..k {
+                            jtr[j] += row[j] * r;
+                            for m in j..k {
+                                jtj[j * MAX_PARAMS + m] += row[j] * row[m];
+                            }
+                        }
+                    }
+                    (jtj, jtr, e)
+                })
+                .collect();
+            for (pj, pr, pe) in parts {
+                for x in 0..MAX_PARAMS * MAX_PARAMS {
+                    jtj[x] += pj[x];
+                }
+                for x in 0..MAX_PARAMS {
+                    jtr[x] += pr[x];
+                }
+                *energy += pe;
+            }
+        })
+    }
+
+    /// Adds the occupancy and prior rows (at the state `w` given to `new`) and returns
+    /// `(JᵀJ, Jᵀr, energy)`, once [`NormalAccumulator::feed`] returned true.
+    pub fn finish(self, w: &WorldSkeleton, terms: &EnergyTerms) -> NormalEquations {
+        let (k, mut jtj, mut jtr, mut energy) = (self.k, self.jtj, self.jtr, self.energy);
+        if let Some(occ) = &terms.occupancy {
+            for (q, (r, e, wgt)) in occ.residuals(w).iter().enumerate() {
+                let mut row = [0.0f64; MAX_PARAMS];
+                for (x, d) in row.iter_mut().zip(&self.occ_deriv).take(k) {
+                    *x = wgt * e.dot(d[q]) as f64;
+                }
+                energy += r * r;
+                for j in 0..k {
+                    jtr[j] += row[j] * r;
+                    for m in j..k {
+                        jtj[j * MAX_PARAMS + m] += row[j] * row[m];
+                    }
+                }
+            }
+        }
+        if let Some(prior) = &terms.prior {
+            for (q, r) in prior.residuals(w).iter().enumerate() {
+                let mut row = [0.0f64; MAX_PARAMS];
+                for (x, d) in row.iter_mut().zip(&self.prior_deriv).take(k) {
+                    *x = d[q];
+                }
+                energy += r * r;
+                for j in 0..k {
+                    jtr[j] += row[j] * r;
+                    for m in j..k {
+                        jtj[j * MAX_PARAMS + m] += row[j] * row[m];
+                    }
+                }
+            }
+        }
+        (jtj, jtr, energy)
+    }
+}
+
+/// The damped step of one Levenberg–Marquardt iteration from the normal equations `ne` of
+/// the state `w`: the trial state (clamped to `limits`) and the step's norm, or `None` when
+/// the damped system is singular (the damping is then raised tenfold: a rejected step). The
+/// trial's energy is then summed (sliced, [`EnergyAccumulator`]) and [`lm_decide`] accepts or
+/// rejects it.
 #[allow(clippy::too_many_arguments)]
-pub fn lm_iteration(
-    w: &mut WorldSkeleton,
+pub fn lm_trial(
+    w: &WorldSkeleton,
     classes: &RadiusClasses,
     limits: &Limits,
     params: &[Param],
-    terms: &EnergyTerms,
+    ne: &NormalEquations,
     lambda: &mut f64,
-    size: f32,
     clamp_bones: &[usize],
-    cache: &mut Option<NormalEquations>,
-) -> LmStep {
+) -> Option<(WorldSkeleton, f64)> {
     let k = params.len();
-    // A rejected step leaves the state as it was: its normal equations are reused.
-    let (mut jtj, jtr, energy) = match *cache {
-        Some(ne) => ne,
-        None => {
-            let ne = normal_equations(w, classes, params, terms, size);
-            *cache = Some(ne);
-            ne
-        }
-    };
+    let (mut jtj, jtr, _) = *ne;
     for j in 0..k {
         for m in 0..j {
             jtj[j * MAX_PARAMS + m] = jtj[m * MAX_PARAMS + j];
@@ -666,24 +824,34 @@ pub fn lm_iteration(
     }
     let Some(delta) = solve(&mut mat, &mut rhs, k) else {
         *lambda *= 10.0;
-        return LmStep {
-            energy_before: energy,
-            energy_after: energy,
-            accepted: false,
-            step_norm: 0.0,
-        };
+        return None;
     };
     let mut trial = w.clone();
     for (j, p) in params.iter().enumerate() {
         apply(&mut trial, classes, p, delta[j] as f32);
     }
     limits.clamp(&mut trial, classes, clamp_bones);
-    let after = terms.total_energy(&trial);
+    let norm = delta[..k].iter().map(|d| d * d).sum::<f64>().sqrt();
+    Some((trial, norm))
+}
+
+/// Ends an LM iteration: the trial state (from [`lm_trial`], total energy `after`) replaces
+/// `w` when it lowers the energy of the normal equations `cache` (which are then dropped,
+/// and the damping divided by 10); otherwise `w` and `cache` stay (a rejected step keeps its
+/// normal equations) and the damping is multiplied by 10.
+pub fn lm_decide(
+    w: &mut WorldSkeleton,
+    trial: WorldSkeleton,
+    norm: f64,
+    after: f64,
+    lambda: &mut f64,
+    cache: &mut Option<NormalEquations>,
+) -> LmStep {
+    let energy = cache.map_or(f64::INFINITY, |ne| ne.2);
     if after < energy {
         *w = trial;
         *cache = None;
         *lambda = (*lambda / 10.0).max(1e-9);
-        let norm = delta[..k].iter().map(|d| d * d).sum::<f64>().sqrt();
         LmStep {
             energy_before: energy,
             energy_after: after,

@@ -18,9 +18,14 @@
 //!    3.54% to 3.47% of the height for 2% more time).
 //!
 //! ## Incremental by design
-//! The algorithm is written as plain sequential code whose elementary steps (one LM iteration
-//! of one bone or pair, one slice of an assignment refresh) are **work units**; after each one
-//! the solver calls a [`Pause`] hook. [`Registration::step`] runs the algorithm on a worker
+//! The algorithm is written as plain sequential code whose elementary steps are **work
+//! units**; after each one the solver calls a [`Pause`] hook. A unit is bounded by the points
+//! it touches, not by the statue's size: a slice of an assignment refresh; an LM iteration's
+//! normal equations, its trial step and an energy evaluation, each cut into slices of at most
+//! [`super::lm::SLICE_POINTS`] points; a group of seeding candidates; and, between solvers,
+//! the set-up (placing the candidates, starting a solver, building the level-1 assignment in
+//! slices of `LEVEL1_SLICE` points). `bench --only fakir/unit_100k` measures the longest unit
+//! on 100k points (1.9 ms, the statue's set-up, each unit at its shortest of four runs). [`Registration::step`] runs the algorithm on a worker
 //! thread that stops at the first unit boundary after the budget is spent and waits there for
 //! the next `step`; [`Registration::run_to_convergence`] runs it with a hook that never
 //! pauses. Pausing never changes what is computed, and every parallel reduction sums
@@ -176,6 +181,9 @@ fn subsample(n: usize, k: usize, seed: u64) -> Vec<u32> {
     out
 }
 
+/// Points added to the level-1 assignment per work unit.
+const LEVEL1_SLICE: usize = 16_384;
+
 /// Share of the progress fraction given to the candidates' short registrations.
 const INIT_SHARE: f32 = 0.15;
 /// Where level 0 (the finalists) ends and level 1 begins, when there is a level 1.
@@ -216,6 +224,8 @@ pub fn register(
     let nb = template.bones.len();
     let level0 = subsample(n, opts.subsample, opts.seed);
     let level0_points: Vec<Vec3> = level0.iter().map(|&i| positions[i as usize]).collect();
+    // The set-up between solvers is cut into units too (none of them may hold a kiosk frame).
+    pause.unit(None).map_err(cancelled)?;
     // Candidates.
     let cands: Vec<Candidate> = match &opts.init {
         Init::Given(s) => {
@@ -230,6 +240,7 @@ pub fn register(
     if cands.is_empty() {
         return Err(Error::input("cannot place the template on this cloud"));
     }
+    pause.unit(None).map_err(cancelled)?;
     let scale = cands[0].scale;
     let size = scale * template_extent(&template);
     let params = AssignParams {
@@ -272,6 +283,7 @@ pub fn register(
             register_skeleton(&mut s, &quick, true).map_err(cancelled)?;
             fraction = s.activity.fraction;
             distances.push(s.mean_distance() + s.occupancy());
+            s.unit().map_err(cancelled)?;
         }
         for (i, d) in distances.iter().enumerate() {
             if *d < distances[chosen] {
@@ -353,13 +365,22 @@ pub fn register(
     s.units = units0;
     s.activity.fraction = fraction;
     s.activity.span = (level1_start, 1.0);
+    s.activity.phase = "setup";
+    s.unit().map_err(cancelled)?;
     // Level 1: all points. (No refresh on the level-0 points first: level 1 replaces the
     // assignment and its schedule refreshes it whole, and without a level 1 the refresh below
     // is the only one needed.)
     if level0.len() < n {
         s.activity.level = 1;
-        let all: Vec<u32> = (0..n as u32).collect();
-        s.set_assignment(assignment_of(positions, &normals, &all, nb, params));
+        // All points, added in work units of `LEVEL1_SLICE` (millions of distances).
+        let mut all = Assignment::with_capacity(n, nb, params);
+        for start in (0..n).step_by(LEVEL1_SLICE) {
+            let end = (start + LEVEL1_SLICE).min(n);
+            let source: Vec<u32> = (start as u32..end as u32).collect();
+            all.push(&positions[start..end], &normals[start..end], &source);
+            s.unit().map_err(cancelled)?;
+        }
+        s.set_assignment(all);
         let fine = ScheduleSettings {
             max_iterations: opts.final_iterations,
             ..opts.schedule.clone()
@@ -443,10 +464,14 @@ impl FullRun<'_> {
         s.free_root = self.free_root;
         s.activity.fraction = *fraction;
         s.activity.span = span;
+        s.activity.phase = "setup";
+        s.unit().map_err(cancelled)?;
         let iterations = register_skeleton(&mut s, &self.opts.schedule, true).map_err(cancelled)?;
         *fraction = s.activity.fraction;
+        let score = s.mean_distance() + s.occupancy();
+        s.unit().map_err(cancelled)?;
         Ok(FullFit {
-            score: s.mean_distance() + s.occupancy(),
+            score,
             implausible: super::init::implausibility(&s.world.to_skeleton()),
             candidate: ci,
             scale: c.scale,
@@ -481,16 +506,19 @@ struct ChannelPause {
 }
 
 impl Pause for ChannelPause {
-    fn unit(&mut self, s: &Solver) -> Result<(), Cancelled> {
+    fn unit(&mut self, s: Option<&Solver>) -> Result<(), Cancelled> {
         self.units += 1;
         if Instant::now() >= self.deadline {
             // Progress is only read while the worker waits, so it is published here, not after
-            // every unit (the mean distance is a pass over all points).
+            // every unit (the mean distance is a pass over all points). A set-up unit (no
+            // solver) leaves the last published state.
             if let Ok(mut p) = self.progress.lock() {
-                p.activity = s.activity.clone();
                 p.units = self.units;
-                p.mean_distance = s.mean_distance();
-                p.skeleton = Some(s.world.to_skeleton());
+                if let Some(s) = s {
+                    p.activity = s.activity.clone();
+                    p.mean_distance = s.mean_distance();
+                    p.skeleton = Some(s.world.to_skeleton());
+                }
             }
             if self.msgs.send(Msg::Paused).is_err() {
                 return Err(Cancelled);

@@ -96,7 +96,7 @@ pub fn chain_pass(s: &mut Solver, chain: &[usize], reverse: bool) -> Result<(), 
 }
 
 /// Energy of a chain's points (bones and their followers).
-pub fn chain_energy(s: &Solver, chain: &[usize]) -> f64 {
+pub fn chain_energy(s: &mut Solver, chain: &[usize]) -> Result<f64, Cancelled> {
     let mut bones = Vec::new();
     for &b in chain {
         bones.extend(s.with_followers(b));
@@ -112,14 +112,14 @@ pub fn chain_passes(
     settings: &ScheduleSettings,
     mut reverse: bool,
 ) -> Result<usize, Cancelled> {
-    let mut before = chain_energy(s, chain);
+    let mut before = chain_energy(s, chain)?;
     let mut passes = 0;
     while passes < settings.max_passes {
         s.activity.pass = passes + 1;
         chain_pass(s, chain, reverse)?;
         passes += 1;
         reverse = !reverse;
-        let after = chain_energy(s, chain);
+        let after = chain_energy(s, chain)?;
         if before - after <= settings.chain_tolerance * before.max(1e-30) {
             break;
         }

@@ -1,13 +1,14 @@
 //! The FAKIR solver state and its elementary optimisations: assignment refresh, one-bone and
 //! two-bone Levenberg–Marquardt rounds (thesis §2.3), the root-block fit and the bootstrap of
-//! an empty bone (§2.4.1). Each LM iteration and each slice of an assignment refresh is one
-//! **work unit**, after which [`Solver::unit`] lets the caller pause (see
-//! [`super::registration`]).
+//! an empty bone (§2.4.1). The **work units**, after each of which [`Solver::unit`] lets the
+//! caller pause (see [`super::registration`]): a slice of an assignment refresh; an LM
+//! iteration's normal equations and its trial step, each cut into slices of at most
+//! [`SLICE_POINTS`] points when its bones carry more; a group of seeding candidates.
 
 use super::assign::Assignment;
 use super::lm::{
-    EnergyTerms, Limits, OCCUPANCY_SAMPLES, OccupancyTerm, PRIOR_MARGIN, Param, RangePrior,
-    lm_iteration, normal_equations,
+    EnergyAccumulator, EnergyTerms, Limits, LmStep, NormalAccumulator, OCCUPANCY_SAMPLES,
+    OccupancyTerm, PRIOR_MARGIN, Param, RangePrior, SLICE_POINTS, lm_decide, lm_trial,
 };
 use super::world::{End, RadiusClasses, WorldSkeleton};
 use crate::anatomy::template::BoneKind;
@@ -26,7 +27,8 @@ pub struct Cancelled;
 /// What the solver is doing (for progress reports).
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct Activity {
-    /// Phase name: "initialisation", "assignment", "block", "chain", "refinement", "done".
+    /// Phase name: "setup" (between solvers), "initialisation", "seeding", "assignment",
+    /// "block", "chain", "done".
     pub phase: &'static str,
     /// Chain being registered.
     pub chain: Option<String>,
@@ -57,13 +59,15 @@ impl Activity {
 
 /// Called after every work unit; returning `Err(Cancelled)` stops the registration.
 pub trait Pause {
-    fn unit(&mut self, solver: &Solver) -> Result<(), Cancelled>;
+    /// `solver`: the solver whose unit ended, or `None` for a unit of set-up work between
+    /// solvers (placing the candidates, starting a level).
+    fn unit(&mut self, solver: Option<&Solver>) -> Result<(), Cancelled>;
 }
 
 /// A pause hook that never pauses.
 pub struct NoPause;
 impl Pause for NoPause {
-    fn unit(&mut self, _: &Solver) -> Result<(), Cancelled> {
+    fn unit(&mut self, _: Option<&Solver>) -> Result<(), Cancelled> {
         Ok(())
     }
 }
@@ -190,7 +194,7 @@ impl<'p> Solver<'p> {
         let Some(pause) = self.pause.take() else {
             return Ok(());
         };
-        let r = pause.unit(self);
+        let r = pause.unit(Some(self));
         self.pause = Some(pause);
         r
     }
@@ -354,40 +358,73 @@ impl<'p> Solver<'p> {
             };
         }
         for _ in 0..self.settings.lm_iterations {
-            if normal_eq.is_none() {
-                // The normal equations and the trial step are two work units (the kiosk's
-                // frames are cut at unit boundaries; on a 100k-point level 1 each takes
-                // milliseconds).
-                let terms = terms!();
-                if terms.count() == 0 && terms.occupancy.is_none() {
-                    return Ok(0.0);
+            // The normal equations and the trial's energy are sums over the points of the
+            // energy's bones: each is cut into work units of at most `SLICE_POINTS` points (the
+            // kiosk's frames are cut at unit boundaries; a 100k-point level 1 gives a bone pair
+            // tens of thousands of points).
+            let ne = match normal_eq {
+                Some(ne) => ne,
+                None => {
+                    let mut acc = {
+                        let terms = terms!();
+                        if terms.count() == 0 && terms.occupancy.is_none() {
+                            return Ok(0.0);
+                        }
+                        NormalAccumulator::new(
+                            &self.world,
+                            &self.classes,
+                            params,
+                            &terms,
+                            self.size,
+                        )
+                    };
+                    while !acc.feed(&terms!(), SLICE_POINTS) {
+                        self.unit()?;
+                    }
+                    let ne = acc.finish(&self.world, &terms!());
+                    normal_eq = Some(ne);
+                    self.unit()?;
+                    ne
                 }
-                normal_eq = Some(normal_equations(
-                    &self.world,
-                    &self.classes,
-                    params,
-                    &terms,
-                    self.size,
-                ));
-                self.unit()?;
-            }
-            let terms = terms!();
+            };
             let limits = if self.calibrating {
                 &self.calibration_limits
             } else {
                 &self.limits
             };
-            let step = lm_iteration(
-                &mut self.world,
+            let trial = lm_trial(
+                &self.world,
                 &self.classes,
                 limits,
                 params,
-                &terms,
+                &ne,
                 &mut lambda,
-                self.size,
                 clamp_bones,
-                &mut normal_eq,
             );
+            let step = match trial {
+                Some((trial, norm)) => {
+                    let mut acc = EnergyAccumulator::new(trial.bones());
+                    while !acc.feed(&terms!(), SLICE_POINTS) {
+                        self.unit()?;
+                    }
+                    let after = acc.finish(&terms!(), &trial);
+                    lm_decide(
+                        &mut self.world,
+                        trial,
+                        norm,
+                        after,
+                        &mut lambda,
+                        &mut normal_eq,
+                    )
+                }
+                // A singular system: a rejected step.
+                None => LmStep {
+                    energy_before: ne.2,
+                    energy_after: ne.2,
+                    accepted: false,
+                    step_norm: 0.0,
+                },
+            };
             self.unit()?;
             last = step.energy_after;
             if step.accepted {
@@ -419,7 +456,7 @@ impl<'p> Solver<'p> {
         }
 
         for _ in 0..self.settings.one_bone_rounds {
-            let before = self.energy_of(&energy);
+            let before = self.energy_of(&energy)?;
             match free {
                 End::Second => {
                     let (a1, a2) = self.swing_axes(b);
@@ -470,7 +507,7 @@ impl<'p> Solver<'p> {
     /// changed by less than 1e-4 (relative) since `before`.
     fn end_round(&mut self, bones: &[usize], before: f64) -> Result<bool, Cancelled> {
         self.refresh()?;
-        let after = self.energy_of(bones);
+        let after = self.energy_of(bones)?;
         Ok((before - after).abs() <= 1e-4 * before.max(1e-30))
     }
 
@@ -485,7 +522,7 @@ impl<'p> Solver<'p> {
             if self.members_of(&energy) == 0 {
                 break;
             }
-            let before = self.energy_of(&energy);
+            let before = self.energy_of(&energy)?;
             self.lm(&[Param::PairRotate { a, b }], &energy, &clamp)?;
             self.lm(&[Param::PairLength { a, b, first: true }], &energy, &clamp)?;
             self.lm(&[Param::PairLength { a, b, first: false }], &energy, &clamp)?;
@@ -542,16 +579,23 @@ impl<'p> Solver<'p> {
         bones.iter().map(|&b| self.members[b].len()).sum()
     }
 
-    /// Current energy of `bones`' points (assignment fixed).
-    pub fn energy_of(&self, bones: &[usize]) -> f64 {
-        EnergyTerms {
-            assignment: &self.assignment,
-            members: &self.members,
-            bones,
-            occupancy: None,
-            prior: None,
+    /// Current energy of `bones`' points (assignment fixed), summed in work units of at most
+    /// [`SLICE_POINTS`] points.
+    pub fn energy_of(&mut self, bones: &[usize]) -> Result<f64, Cancelled> {
+        let mut acc = EnergyAccumulator::new(self.world.bones());
+        loop {
+            let terms = EnergyTerms {
+                assignment: &self.assignment,
+                members: &self.members,
+                bones,
+                occupancy: None,
+                prior: None,
+            };
+            if acc.feed(&terms, SLICE_POINTS) {
+                return Ok(acc.data);
+            }
+            self.unit()?;
         }
-        .energy(&self.world.bones())
     }
 
     /// Model → data term: mean of `max(0, |s − q| − spacing)` over samples `s` of the bones'

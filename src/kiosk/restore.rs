@@ -672,7 +672,7 @@ fn background<T: Send + 'static>(job: impl FnOnce() -> T + Send + 'static) -> Pe
 struct CancelFlag<'a>(&'a AtomicBool);
 
 impl Pause for CancelFlag<'_> {
-    fn unit(&mut self, _: &Solver<'_>) -> std::result::Result<(), Cancelled> {
+    fn unit(&mut self, _: Option<&Solver<'_>>) -> std::result::Result<(), Cancelled> {
         if self.0.load(Ordering::Relaxed) {
             Err(Cancelled)
         } else {
