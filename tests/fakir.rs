@@ -389,7 +389,7 @@ fn an_assignment_built_in_slices_equals_one_built_at_once() {
     a.refresh(&prepared, &[0, 1, 2, 3]);
     b.refresh(&prepared, &[0, 1, 2, 3]);
     assert_eq!(a.label, b.label);
-    assert!(a.label.iter().any(|&l| l == 3) && a.label.iter().any(|&l| l == 0));
+    assert!(a.label.contains(&3) && a.label.contains(&0));
     for i in 0..n {
         for bone in 0..4 {
             assert_eq!(a.distance(bone, i).to_bits(), b.distance(bone, i).to_bits());
