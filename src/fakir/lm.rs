@@ -460,39 +460,46 @@ impl EnergyTerms<'_> {
 pub const SLICE_POINTS: usize = 4 * CHUNK;
 
 /// Where a sliced pass over the members of an energy's bones stands: bone `bone` of the
-/// energy's bones, its members from `offset` on (a multiple of [`CHUNK`]).
-#[derive(Clone, Copy, Debug, Default)]
+/// energy's bones (prepared once, when the pass reaches it), its members from `offset` on (a
+/// multiple of [`CHUNK`]).
+#[derive(Clone, Debug, Default)]
 struct Cursor {
     bone: usize,
     offset: usize,
+    prepared: Option<PreparedBone>,
 }
 
 impl Cursor {
     /// Visits the next runs of members, at most `budget` points rounded up to whole chunks,
-    /// in the fixed order (bone by bone, each bone's members in order): `f(k, run, last)` gets
-    /// the position `k` in `terms.bones`, the members' run, and whether it ends the bone's
-    /// members. Returns true when every member has been visited.
+    /// in the fixed order (bone by bone, each bone's members in order): `f(b, bone, run, last)`
+    /// gets the bone's index `b`, its world bone from `bones` prepared, the members' run, and
+    /// whether the run ends the bone's members. Returns true when every member has been
+    /// visited.
     fn advance(
         &mut self,
         terms: &EnergyTerms,
+        bones: &[Bone],
         budget: usize,
-        mut f: impl FnMut(usize, &[u32], bool),
+        mut f: impl FnMut(usize, &PreparedBone, &[u32], bool),
     ) -> bool {
         let mut chunks = budget.div_ceil(CHUNK).max(1);
         while self.bone < terms.bones.len() {
             if chunks == 0 {
                 return false;
             }
-            let members = &terms.members[terms.bones[self.bone]];
+            let b = terms.bones[self.bone];
+            let pb = self.prepared.get_or_insert_with(|| bones[b].prepare());
+            let members = &terms.members[b];
             let end = members
                 .len()
                 .min(self.offset.saturating_add(chunks.saturating_mul(CHUNK)));
             let last = end == members.len();
-            f(self.bone, &members[self.offset.min(end)..end], last);
+            f(b, pb, &members[self.offset.min(end)..end], last);
             chunks -= (end - self.offset.min(end)).div_ceil(CHUNK);
             if last {
                 self.bone += 1;
                 self.offset = 0;
+                self.prepared = None;
             } else {
                 self.offset = end;
             }
@@ -506,7 +513,6 @@ impl Cursor {
 /// sums in order; then the bones in order.
 pub struct EnergyAccumulator {
     bones: Vec<Bone>,
-    prepared: Option<(usize, PreparedBone)>,
     cursor: Cursor,
     bone_sum: f64,
     /// The data energy summed so far (all of it once [`EnergyAccumulator::feed`] returned true).
@@ -518,7 +524,6 @@ impl EnergyAccumulator {
     pub fn new(bones: Vec<Bone>) -> Self {
         EnergyAccumulator {
             bones,
-            prepared: None,
             cursor: Cursor::default(),
             bone_sum: 0.0,
             data: 0.0,
@@ -528,40 +533,34 @@ impl EnergyAccumulator {
     /// Adds the next `budget` points (whole chunks); true when every point is in.
     pub fn feed(&mut self, terms: &EnergyTerms, budget: usize) -> bool {
         let a = terms.assignment;
-        let (bones, prepared, bone_sum, data) = (
-            &self.bones,
-            &mut self.prepared,
-            &mut self.bone_sum,
-            &mut self.data,
-        );
-        self.cursor.advance(terms, budget, |k, run, last| {
-            let b = terms.bones[k];
-            if prepared.as_ref().is_none_or(|(x, _)| *x != k) {
-                *prepared = Some((k, bones[b].prepare()));
-            }
-            let pb = &prepared.as_ref().expect("prepared above").1;
-            let parts: Vec<f64> = run
-                .par_chunks(CHUNK)
-                .map(|chunk| {
-                    chunk
-                        .iter()
-                        .map(|&i| {
-                            let r = pb
-                                .project_constrained(a.positions[i as usize], a.normals[i as usize])
-                                .residual as f64;
-                            r * r
-                        })
-                        .sum::<f64>()
-                })
-                .collect();
-            for p in parts {
-                *bone_sum += p;
-            }
-            if last {
-                *data += *bone_sum;
-                *bone_sum = 0.0;
-            }
-        })
+        let (bone_sum, data) = (&mut self.bone_sum, &mut self.data);
+        self.cursor
+            .advance(terms, &self.bones, budget, |_, pb, run, last| {
+                let parts: Vec<f64> = run
+                    .par_chunks(CHUNK)
+                    .map(|chunk| {
+                        chunk
+                            .iter()
+                            .map(|&i| {
+                                let r = pb
+                                    .project_constrained(
+                                        a.positions[i as usize],
+                                        a.normals[i as usize],
+                                    )
+                                    .residual as f64;
+                                r * r
+                            })
+                            .sum::<f64>()
+                    })
+                    .collect();
+                for p in parts {
+                    *bone_sum += p;
+                }
+                if last {
+                    *data += *bone_sum;
+                    *bone_sum = 0.0;
+                }
+            })
     }
 
     /// The total energy (data, occupancy, prior) of the world skeleton `w` whose bones were
@@ -618,7 +617,6 @@ pub struct NormalAccumulator {
     geo: Vec<[GeoDeriv; MAX_PARAMS]>,
     occ_deriv: Vec<Vec<Vec3>>,
     prior_deriv: Vec<Vec<f64>>,
-    prepared: Option<(usize, PreparedBone)>,
     cursor: Cursor,
     jtj: [f64; MAX_PARAMS * MAX_PARAMS],
     jtr: [f64; MAX_PARAMS],
@@ -681,7 +679,6 @@ impl NormalAccumulator {
             geo,
             occ_deriv,
             prior_deriv,
-            prepared: None,
             cursor: Cursor::default(),
             jtj: [0.0; MAX_PARAMS * MAX_PARAMS],
             jtr: [0.0; MAX_PARAMS],
@@ -694,61 +691,53 @@ impl NormalAccumulator {
     pub fn feed(&mut self, terms: &EnergyTerms, budget: usize) -> bool {
         let a = terms.assignment;
         let k = self.k;
-        let (bones, geo, prepared, jtj, jtr, energy) = (
-            &self.bones,
-            &self.geo,
-            &mut self.prepared,
-            &mut self.jtj,
-            &mut self.jtr,
-            &mut self.energy,
-        );
-        self.cursor.advance(terms, budget, |pos, run, _| {
-            let b = terms.bones[pos];
-            if prepared.as_ref().is_none_or(|(x, _)| *x != pos) {
-                *prepared = Some((pos, bones[b].prepare()));
-            }
-            let pb = &prepared.as_ref().expect("prepared above").1;
-            let g = &geo[b];
-            let parts: Vec<([f64; MAX_PARAMS * MAX_PARAMS], [f64; MAX_PARAMS], f64)> = run
-                .par_chunks(CHUNK)
-                .map(|chunk| {
-                    let mut jtj = [0.0f64; MAX_PARAMS * MAX_PARAMS];
-                    let mut jtr = [0.0f64; MAX_PARAMS];
-                    let mut e = 0.0f64;
-                    let mut row = [0.0f64; MAX_PARAMS];
-                    for &i in chunk {
-                        let proj =
-                            pb.project_constrained(a.positions[i as usize], a.normals[i as usize]);
-                        let grad = proj.gradient();
-                        let r = proj.residual as f64;
-                        e += r * r;
-                        for j in 0..k {
-                            let d = &g[j];
-                            row[j] = (grad.dc1.dot(d.dc1)
-                                + grad.dc2.dot(d.dc2)
-                                + grad.dr1 * d.dr1
-                                + grad.dr2 * d.dr2) as f64;
-                        }
-                        for j in 0..k {
-                            jtr[j] += row[j] * r;
-                            for m in j..k {
-                                jtj[j * MAX_PARAMS + m] += row[j] * row[m];
+        let (geo, jtj, jtr, energy) = (&self.geo, &mut self.jtj, &mut self.jtr, &mut self.energy);
+        self.cursor
+            .advance(terms, &self.bones, budget, |b, pb, run, _| {
+                let g = &geo[b];
+                let parts: Vec<([f64; MAX_PARAMS * MAX_PARAMS], [f64; MAX_PARAMS], f64)> = run
+                    .par_chunks(CHUNK)
+                    .map(|chunk| {
+                        let mut jtj = [0.0f64; MAX_PARAMS * MAX_PARAMS];
+                        let mut jtr = [0.0f64; MAX_PARAMS];
+                        let mut e = 0.0f64;
+                        let mut row = [0.0f64; MAX_PARAMS];
+                        for &i in chunk {
+                            let proj = pb.project_constrained(
+                                a.positions[i as usize],
+                                a.normals[i as usize],
+                            );
+                            let grad = proj.gradient();
+                            let r = proj.residual as f64;
+                            e += r * r;
+                            for j in 0..k {
+                                let d = &g[j];
+                                row[j] = (grad.dc1.dot(d.dc1)
+                                    + grad.dc2.dot(d.dc2)
+                                    + grad.dr1 * d.dr1
+                                    + grad.dr2 * d.dr2)
+                                    as f64;
+                            }
+                            for j in 0..k {
+                                jtr[j] += row[j] * r;
+                                for m in j..k {
+                                    jtj[j * MAX_PARAMS + m] += row[j] * row[m];
+                                }
                             }
                         }
+                        (jtj, jtr, e)
+                    })
+                    .collect();
+                for (pj, pr, pe) in parts {
+                    for x in 0..MAX_PARAMS * MAX_PARAMS {
+                        jtj[x] += pj[x];
                     }
-                    (jtj, jtr, e)
-                })
-                .collect();
-            for (pj, pr, pe) in parts {
-                for x in 0..MAX_PARAMS * MAX_PARAMS {
-                    jtj[x] += pj[x];
+                    for x in 0..MAX_PARAMS {
+                        jtr[x] += pr[x];
+                    }
+                    *energy += pe;
                 }
-                for x in 0..MAX_PARAMS {
-                    jtr[x] += pr[x];
-                }
-                *energy += pe;
-            }
-        })
+            })
     }
 
     /// Adds the occupancy and prior rows (at the state `w` given to `new`) and returns
