@@ -25,12 +25,13 @@
 //! [`super::lm::SLICE_POINTS`] points; a group of seeding candidates; and, between solvers,
 //! the set-up (placing the candidates, starting a solver, building the level-1 assignment in
 //! slices of `LEVEL1_SLICE` points). `bench --only fakir/unit_100k` measures the longest unit
-//! on 100k points (2.0 ms, the set-up, each unit at its shortest of four runs). [`Registration::step`] runs the algorithm on a worker
-//! thread that stops at the first unit boundary after the budget is spent and waits there for
-//! the next `step`; [`Registration::run_to_convergence`] runs it with a hook that never
-//! pauses. Pausing never changes what is computed, and every parallel reduction sums
-//! fixed-size chunks in a fixed order, so any sequence of budgets gives exactly the same
-//! skeleton, bit for bit, as an uninterrupted run on any number of threads.
+//! on 100k points (2.0 ms, the set-up, each unit at its shortest of four runs).
+//! [`Registration::step`] runs the algorithm on a worker thread that stops at the first unit
+//! boundary after the budget is spent and waits there for the next `step`;
+//! [`Registration::run_to_convergence`] runs it with a hook that never pauses. Pausing never
+//! changes what is computed, and every parallel reduction sums fixed-size chunks in a fixed
+//! order, so any sequence of budgets gives exactly the same skeleton, bit for bit, as an
+//! uninterrupted run on any number of threads.
 
 use super::assign::{AssignParams, Assignment};
 use super::init::{Candidate, Init, candidates, rescaled};
