@@ -69,13 +69,8 @@ impl Assignment {
         n_bones: usize,
         params: AssignParams,
     ) -> Self {
-        let n = positions.len();
-        let mut a = Assignment::with_capacity(0, n_bones, params);
-        a.dist = vec![f32::INFINITY; n * n_bones];
-        a.cone = vec![false; n * n_bones];
-        a.bound = vec![false; n * n_bones];
-        a.label = vec![0; n];
-        (a.positions, a.normals, a.source) = (positions, normals, source);
+        let mut a = Assignment::with_capacity(positions.len(), n_bones, params);
+        a.push(&positions, &normals, &source);
         a
     }
 
@@ -107,7 +102,7 @@ impl Assignment {
         self.positions.extend_from_slice(positions);
         self.normals.extend_from_slice(normals);
         self.source.extend_from_slice(source);
-        let rows = (self.len()) * self.n_bones;
+        let rows = self.len() * self.n_bones;
         self.dist.resize(rows, f32::INFINITY);
         self.cone.resize(rows, false);
         self.bound.resize(rows, false);

@@ -608,6 +608,24 @@ pub fn normal_equations(
     acc.finish(w, terms)
 }
 
+/// Adds one residual `r` with its Jacobian row (first `k` entries) to `JᵀJ` (upper triangle)
+/// and `Jᵀr`.
+#[inline]
+fn add_row(
+    jtj: &mut [f64; MAX_PARAMS * MAX_PARAMS],
+    jtr: &mut [f64; MAX_PARAMS],
+    row: &[f64; MAX_PARAMS],
+    r: f64,
+    k: usize,
+) {
+    for j in 0..k {
+        jtr[j] += row[j] * r;
+        for m in j..k {
+            jtj[j * MAX_PARAMS + m] += row[j] * row[m];
+        }
+    }
+}
+
 /// [`normal_equations`] summed slice by slice ([`SLICE_POINTS`] points of the members at a
 /// time), with exactly the sums of an unsliced pass: `new` takes the geometry Jacobian,
 /// `feed` adds the members' rows in order, `finish` adds the occupancy and prior rows.
@@ -718,12 +736,7 @@ impl NormalAccumulator {
                                     + grad.dr2 * d.dr2)
                                     as f64;
                             }
-                            for j in 0..k {
-                                jtr[j] += row[j] * r;
-                                for m in j..k {
-                                    jtj[j * MAX_PARAMS + m] += row[j] * row[m];
-                                }
-                            }
+                            add_row(&mut jtj, &mut jtr, &row, r, k);
                         }
                         (jtj, jtr, e)
                     })
@@ -751,12 +764,7 @@ impl NormalAccumulator {
                     *x = wgt * e.dot(d[q]) as f64;
                 }
                 energy += r * r;
-                for j in 0..k {
-                    jtr[j] += row[j] * r;
-                    for m in j..k {
-                        jtj[j * MAX_PARAMS + m] += row[j] * row[m];
-                    }
-                }
+                add_row(&mut jtj, &mut jtr, &row, *r, k);
             }
         }
         if let Some(prior) = &terms.prior {
@@ -766,12 +774,7 @@ impl NormalAccumulator {
                     *x = d[q];
                 }
                 energy += r * r;
-                for j in 0..k {
-                    jtr[j] += row[j] * r;
-                    for m in j..k {
-                        jtj[j * MAX_PARAMS + m] += row[j] * row[m];
-                    }
-                }
+                add_row(&mut jtj, &mut jtr, &row, *r, k);
             }
         }
         (jtj, jtr, energy)
