@@ -35,6 +35,17 @@ pub struct AssignParams {
     pub cone_abs: f32,
 }
 
+/// Points come as parallel arrays of positions, normals and cloud indices.
+fn check_lengths(positions: &[Vec3], normals: &[Vec3], source: &[u32]) {
+    let k = positions.len();
+    assert!(
+        normals.len() == k && source.len() == k,
+        "unequal point arrays: {k} positions, {} normals, {} indices",
+        normals.len(),
+        source.len()
+    );
+}
+
 /// The assignment of a set of points (see the module docs).
 #[derive(Clone, Debug)]
 pub struct Assignment {
@@ -69,8 +80,10 @@ impl Assignment {
         n_bones: usize,
         params: AssignParams,
     ) -> Self {
-        let mut a = Assignment::with_capacity(positions.len(), n_bones, params);
-        a.push(&positions, &normals, &source);
+        check_lengths(&positions, &normals, &source);
+        let mut a = Assignment::with_capacity(0, n_bones, params);
+        (a.positions, a.normals, a.source) = (positions, normals, source);
+        a.grow_rows();
         a
     }
 
@@ -94,14 +107,15 @@ impl Assignment {
     /// Appends points (positions, normals and indices in the full cloud, of equal lengths),
     /// their distances at infinity and labels 0 until the next refresh.
     pub fn push(&mut self, positions: &[Vec3], normals: &[Vec3], source: &[u32]) {
-        let k = positions.len();
-        assert!(
-            normals.len() == k && source.len() == k,
-            "unequal point arrays"
-        );
+        check_lengths(positions, normals, source);
         self.positions.extend_from_slice(positions);
         self.normals.extend_from_slice(normals);
         self.source.extend_from_slice(source);
+        self.grow_rows();
+    }
+
+    /// Gives the points added since the last call their rows: distances at infinity, labels 0.
+    fn grow_rows(&mut self) {
         let rows = self.len() * self.n_bones;
         self.dist.resize(rows, f32::INFINITY);
         self.cone.resize(rows, false);
