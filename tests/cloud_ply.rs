@@ -200,7 +200,16 @@ fn round_trip_positions_only_and_colours() {
 fn round_trip_with_labels() {
     let dir = scratch("cloud_ply_round_labels");
     let cloud = random_cloud(1000, true, true);
-    let labels: Vec<u32> = (0..1000).map(|i| (i * 13 % 17) as u32).collect();
+    // Every 100th point has no label (`u32::MAX`, written as -1).
+    let labels: Vec<u32> = (0..1000)
+        .map(|i| {
+            if i % 100 == 7 {
+                u32::MAX
+            } else {
+                (i * 13 % 17) as u32
+            }
+        })
+        .collect();
     let opts = WriteOptions {
         colors: true,
         labels: Some(("bone".into(), labels.clone())),
@@ -218,7 +227,11 @@ fn round_trip_with_labels() {
     );
     let (again, values) = read_ply_with_property(&path, &ReadOptions::default(), "bone").unwrap();
     assert_eq!(again, cloud);
-    let values: Vec<u32> = values.iter().map(|&v| v as u32).collect();
+    assert_eq!(values.iter().filter(|&&v| v == -1.0).count(), 10);
+    let values: Vec<u32> = values
+        .iter()
+        .map(|&v| if v < 0.0 { u32::MAX } else { v as u32 })
+        .collect();
     assert_eq!(values, labels);
     // A property that is not there.
     let e = read_ply_with_property(&path, &ReadOptions::default(), "muscle").unwrap_err();
@@ -265,7 +278,7 @@ fn failed_write_keeps_the_old_file_and_leaves_no_temporary() {
     )
     .unwrap_err();
     assert!(matches!(e.problem, PlyProblem::Inconsistent(_)), "{e}");
-    let labels = Some(("bone".to_string(), vec![u32::MAX; 50]));
+    let labels = Some(("bone".to_string(), vec![i32::MAX as u32 + 1; 50]));
     let e = write_ply(
         &path,
         &good,

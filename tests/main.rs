@@ -10,6 +10,7 @@ mod common;
 mod anatomy;
 mod anatomy_pose;
 mod cli;
+mod cloud_base;
 mod cloud_normals;
 mod cloud_ply;
 mod fakir;

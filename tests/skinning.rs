@@ -392,3 +392,97 @@ fn tabulated_heightfield_bend_matches_the_per_point_iteration() {
         assert!(fast.positions.iter().all(|p| p.is_finite()), "{name}: NaN");
     }
 }
+
+#[test]
+fn a_base_stays_where_it_stands_and_follows_only_the_root_placement() {
+    use pygmalion::cloud::base::{BaseOptions, detect_base};
+    use pygmalion::synth::PLINTH_LABEL;
+    let t = Arc::new(Template::builtin("human").unwrap());
+    let s = generate(
+        t,
+        &SynthOptions {
+            points: 8_000,
+            seed: 4,
+            plinth_share: 0.25,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let (cloud, skel) = (s.cloud, s.truth);
+    let base = detect_base(
+        &cloud.positions,
+        cloud.normals.as_ref().unwrap(),
+        None,
+        &BaseOptions::default(),
+    )
+    .expect("base");
+    let bind = Binding::new(&cloud, &skel)
+        .unwrap()
+        .with_base(&base.points)
+        .unwrap();
+    assert_eq!(bind.base(), base.points.as_slice());
+    let on_base = |i: usize| base.points.binary_search(&(i as u32)).is_ok();
+    // Every joint bent, twisted, lengthened: the base does not move (exactly), the figure does.
+    let target = worst_case(&skel);
+    let normals = cloud.normals.as_ref().unwrap();
+    for m in Method::ALL {
+        let out = bind.deform_cloud(&target, m).unwrap();
+        let on = out.normals.as_ref().unwrap();
+        let mut moved_figure = 0;
+        for i in 0..cloud.len() {
+            if on_base(i) {
+                assert!(
+                    (out.positions[i] - cloud.positions[i]).length() <= 1e-5,
+                    "{m}"
+                );
+                assert!((on[i] - normals[i]).length() <= 1e-4, "{m}");
+            } else if (out.positions[i] - cloud.positions[i]).length() > 1e-3 {
+                moved_figure += 1;
+            }
+        }
+        assert!(
+            moved_figure > cloud.len() / 2,
+            "{m}: the figure did not move"
+        );
+    }
+    // Without the base, the plinth's points near the feet would follow them.
+    let plain = Binding::new(&cloud, &skel).unwrap();
+    let out = plain.deform_cloud(&target, Method::Baseline).unwrap();
+    let plinth_moved = (0..cloud.len())
+        .filter(|&i| s.labels[i] == PLINTH_LABEL)
+        .filter(|&i| (out.positions[i] - cloud.positions[i]).length() > 1e-3)
+        .count();
+    assert!(plinth_moved > 0);
+    // A rigid motion of the root moves the base rigidly.
+    let q = Quat::from_axis_angle(Vec3::new(0.3, 1.0, -0.2).normalize(), 1.1);
+    let tr = Vec3::new(0.4, -2.0, 0.7);
+    let mut moved = skel.clone();
+    moved.transform_rigid(q, tr);
+    let out = bind.deform_cloud(&moved, Method::Baseline).unwrap();
+    for &i in bind.base() {
+        let i = i as usize;
+        assert!((out.positions[i] - (q * cloud.positions[i] + tr)).length() <= 2e-5);
+    }
+    // Saved and loaded, the base is kept.
+    let dir = crate::common::scratch("skinning_store_base");
+    let path = dir.join("statue.binding");
+    bind.save(&path).unwrap();
+    let back = Binding::load(&path, skel.template.clone()).unwrap();
+    assert_eq!(back.base(), bind.base());
+    assert_eq!(
+        back.deform_cloud(&target, Method::Baseline)
+            .unwrap()
+            .positions,
+        bind.deform_cloud(&target, Method::Baseline)
+            .unwrap()
+            .positions
+    );
+    // An index out of range is refused.
+    let n = cloud.len() as u32;
+    assert!(
+        Binding::new(&cloud, &skel)
+            .unwrap()
+            .with_base(&[0, n])
+            .is_err()
+    );
+}

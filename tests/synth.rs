@@ -4,7 +4,7 @@
 use pygmalion::anatomy::{BoneKind, Skeleton, Template};
 use pygmalion::geometry::PreparedBone;
 use pygmalion::math::Vec3;
-use pygmalion::synth::{Cut, SynthOptions, chain4, generate};
+use pygmalion::synth::{Cut, PLINTH_LABEL, SynthOptions, chain4, generate};
 use std::sync::Arc;
 
 fn human() -> Arc<Template> {
@@ -308,6 +308,71 @@ fn bad_options_are_errors() {
             &SynthOptions {
                 proportion_jitter: 2.0,
                 ..Default::default()
+            }
+        )
+        .is_err()
+    );
+}
+
+#[test]
+fn a_plinth_adds_a_labelled_box_under_the_figure_and_leaves_the_figure_alone() {
+    let o = SynthOptions {
+        points: 8_000,
+        seed: 5,
+        height: 1.7,
+        rigid: true,
+        ..Default::default()
+    };
+    let bare = generate(human(), &o).unwrap();
+    let with = generate(
+        human(),
+        &SynthOptions {
+            plinth_share: 0.25,
+            ..o.clone()
+        },
+    )
+    .unwrap();
+    // The figure is the same, point for point; the plinth follows it.
+    assert_eq!(with.cloud.len(), 8_000 + 2_000);
+    assert_eq!(&with.cloud.positions[..8_000], &bare.cloud.positions[..]);
+    assert_eq!(&with.labels[..8_000], &bare.labels[..]);
+    assert!(with.labels[8_000..].iter().all(|&l| l == PLINTH_LABEL));
+    // The plinth lies under the figure along the template's up, its top touching the lowest
+    // figure point (within 1e-4 of the height), 0.08 × height high.
+    let up = with.rigid.0 * Vec3::Y;
+    let low = bare
+        .cloud
+        .positions
+        .iter()
+        .map(|p| p.dot(up))
+        .fold(f32::INFINITY, f32::min);
+    let heights: Vec<f32> = with.cloud.positions[8_000..]
+        .iter()
+        .map(|p| p.dot(up))
+        .collect();
+    let top = heights.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+    let bottom = heights.iter().cloned().fold(f32::INFINITY, f32::min);
+    assert!(
+        (top - low).abs() < 1.7e-4,
+        "top {top}, lowest figure point {low}"
+    );
+    assert!((top - bottom - 0.08 * 1.7).abs() < 1.7e-4);
+    // Outward normals: each points away from the plinth's centre.
+    let normals = with.cloud.normals.as_ref().unwrap();
+    let centre = with.cloud.positions[8_000..]
+        .iter()
+        .fold(Vec3::ZERO, |a, p| a + *p)
+        / 2_000.0;
+    for (p, n) in with.cloud.positions[8_000..].iter().zip(&normals[8_000..]) {
+        assert!((*p - centre).dot(*n) > 0.0);
+    }
+    // Out-of-range shares are refused.
+    assert!(
+        generate(
+            human(),
+            &SynthOptions {
+                plinth_share: -1.0,
+                ..o
             }
         )
         .is_err()

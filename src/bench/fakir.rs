@@ -30,6 +30,10 @@ pub(super) fn entries() -> Vec<Entry> {
             run: unit_100k,
         },
         Entry {
+            name: "fakir/unit_100k_plinth",
+            run: unit_100k_plinth,
+        },
+        Entry {
             name: "fakir/accuracy_posed",
             run: accuracy_posed,
         },
@@ -146,27 +150,44 @@ impl Pause for UnitTimer {
 /// where they come from). The raw times of the last run are given too (`raw_max_unit_ms`,
 /// `raw_units_over_2ms`), noise included.
 fn unit_100k(runs: usize) -> Result<BenchResult> {
-    let statue = human(100_000)?;
+    unit_times("fakir/unit_100k", &human(100_000)?, runs)
+}
+
+/// [`unit_100k`] on a statue standing on a plinth (80k figure points and 20k plinth points,
+/// `synth --plinth 0.25`): the base is found and set aside in set-up units.
+fn unit_100k_plinth(runs: usize) -> Result<BenchResult> {
+    let t = Arc::new(Template::builtin("human")?);
+    let statue = generate(
+        t,
+        &SynthOptions {
+            points: 80_000,
+            seed: 1,
+            rigid: true,
+            height: 1.7,
+            plinth_share: 0.25,
+            ..Default::default()
+        },
+    )?;
+    unit_times("fakir/unit_100k_plinth", &statue, runs)
+}
+
+/// The work units of registering `statue` (see [`unit_100k`] for the method).
+fn unit_times(name: &str, statue: &SynthStatue, runs: usize) -> Result<BenchResult> {
     let t = statue.truth.template.clone();
     let mut all: Vec<Vec<(f64, &'static str, usize)>> = Vec::new();
-    let mut r = time_it(
-        "fakir/unit_100k",
-        statue.cloud.len() as u64,
-        runs.min(3),
-        || {
-            let mut timer = UnitTimer {
-                last: std::time::Instant::now(),
-                units: Vec::new(),
-            };
-            let _ = register(
-                &statue.cloud,
-                t.clone(),
-                &RegistrationOptions::default(),
-                &mut timer,
-            );
-            all.push(timer.units);
-        },
-    );
+    let mut r = time_it(name, statue.cloud.len() as u64, runs.min(3), || {
+        let mut timer = UnitTimer {
+            last: std::time::Instant::now(),
+            units: Vec::new(),
+        };
+        let _ = register(
+            &statue.cloud,
+            t.clone(),
+            &RegistrationOptions::default(),
+            &mut timer,
+        );
+        all.push(timer.units);
+    });
     let last = all.last().cloned().unwrap_or_default();
     // Each unit at its shortest over the runs (the runs do the same units).
     let mut shortest = last.clone();

@@ -115,6 +115,9 @@ enum Command {
         /// Apply a random rigid transform.
         #[arg(long)]
         rigid: bool,
+        /// Add a plinth under the figure with this many points per figure point (0: none).
+        #[arg(long, default_value_t = 0.0)]
+        plinth: f32,
         /// Write the ground-truth skeleton (JSON) here.
         #[arg(long)]
         truth: Option<PathBuf>,
@@ -147,6 +150,9 @@ enum Command {
         /// Drop points with NaN/inf coordinates instead of refusing the file.
         #[arg(long)]
         drop_non_finite: bool,
+        /// Register every point: do not look for a base (plinth) to set aside.
+        #[arg(long)]
+        keep_base: bool,
     },
     /// Re-poses a registered statue by point-set skinning and writes the re-posed cloud.
     Repose {
@@ -337,6 +343,7 @@ where
             poisson,
             cut,
             rigid,
+            plinth,
             truth,
             labels,
         } => {
@@ -354,6 +361,7 @@ where
                 poisson_lambda: poisson,
                 cuts,
                 rigid,
+                plinth_share: plinth,
             };
             synth(&output, &template, &opts, truth.as_deref(), labels)
         }
@@ -366,6 +374,7 @@ where
             out,
             labels,
             drop_non_finite,
+            keep_base,
         } => crate::cli::register::run(
             &input,
             &template,
@@ -375,6 +384,7 @@ where
             out.as_deref(),
             labels.as_deref(),
             drop_non_finite,
+            keep_base,
         ),
         Command::Repose {
             input,
@@ -537,6 +547,27 @@ fn report(path: &Path, cloud: &crate::cloud::PointCloud, read_secs: f64) -> Resu
         "scale:       {:.6} (largest bounding-box edge)",
         cloud.scale_estimate()
     );
+    // The base (plinth) that `register` would set aside (needs the file's normals).
+    match cloud.normals.as_deref().map(|n| {
+        crate::cloud::base::detect_base(
+            &cloud.positions,
+            n,
+            None,
+            &crate::cloud::base::BaseOptions::default(),
+        )
+    }) {
+        Some(Some(b)) => println!(
+            "base:        {} points ({:.1}%) below the top face at {:.6} along up [{:.3}, {:.3}, {:.3}]",
+            b.points.len(),
+            100.0 * b.points.len() as f64 / cloud.len() as f64,
+            b.top,
+            b.up.x,
+            b.up.y,
+            b.up.z
+        ),
+        Some(None) => println!("base:        none found"),
+        None => println!("base:        not looked for (no normals in the file)"),
+    }
     println!("read in:     {read_secs:.3} s");
     Ok(())
 }
@@ -635,7 +666,7 @@ fn demo() -> Result<()> {
         path,
         Arc::new(cloud),
         Arc::new(template),
-        crate::fakir::Init::Auto,
+        crate::fakir::RegistrationOptions::default(),
         None,
         None,
     )?;

@@ -134,7 +134,7 @@ pub fn run_picture(a: &PictureArgs) -> Result<()> {
     let mut panels: Vec<(String, PointCloud)> = vec![("statue".into(), cloud.clone())];
     if let (Some((fitted, target)), Some(_)) = (&fits, a.pose) {
         let start = Instant::now();
-        let binding = Binding::new(&cloud, fitted)?;
+        let binding = Binding::new_on_base(&cloud, fitted)?;
         println!(
             "bound {} points in {:.3} s",
             cloud.len(),
@@ -194,7 +194,7 @@ pub fn run_film(a: &FilmArgs) -> Result<()> {
     }
     let (fitted, target) = super::repose::target(a.fit, a.pose, None, a.template)?;
     let cloud = read_with_normals(a.input)?;
-    let binding = Binding::new(&cloud, &fitted)?;
+    let binding = Binding::new_on_base(&cloud, &fitted)?;
     std::fs::create_dir_all(a.out_dir).map_err(|e| Error::Io {
         path: a.out_dir.to_path_buf(),
         source: e,

@@ -60,6 +60,20 @@ pub struct FitReport {
     pub work_units: u64,
     /// Points assigned to each bone.
     pub assignment: BTreeMap<String, usize>,
+    /// The base (plinth) set aside, if one was found; its points are labelled
+    /// `4294967295` (`u32::MAX`) in `--labels`.
+    pub base: Option<BaseReport>,
+}
+
+/// The base in `FIT.json`.
+#[derive(Serialize)]
+pub struct BaseReport {
+    /// Normal of its top face (the statue's up).
+    pub up: [f32; 3],
+    /// Height of the top face along `up` (`p·up`).
+    pub top: f32,
+    /// Its points.
+    pub points: usize,
 }
 
 impl FitReport {
@@ -84,6 +98,11 @@ impl FitReport {
                 .zip(&fit.bone_counts)
                 .map(|(b, c)| (b.name.clone(), *c))
                 .collect(),
+            base: fit.base.as_ref().map(|b| BaseReport {
+                up: b.up.to_array(),
+                top: b.top,
+                points: b.points.len(),
+            }),
         }
     }
 }
@@ -99,6 +118,7 @@ pub fn run(
     out: Option<&Path>,
     labels: Option<&Path>,
     drop_non_finite: bool,
+    keep_base: bool,
 ) -> Result<()> {
     let template = Arc::new(Template::resolve(template)?);
     let cloud = super::read(input, drop_non_finite)?;
@@ -116,7 +136,16 @@ pub fn run(
         (None, Some(up), None) => Init::Up(up),
         (None, None, None) => Init::Auto,
     };
-    fit(input, Arc::new(cloud), template, init, out, labels)
+    let opts = RegistrationOptions {
+        init,
+        base: if keep_base {
+            None
+        } else {
+            RegistrationOptions::default().base
+        },
+        ..Default::default()
+    };
+    fit(input, Arc::new(cloud), template, opts, out, labels)
 }
 
 /// Fits `template` to a cloud already read from `input` (named in messages), with the
@@ -125,14 +154,10 @@ pub fn fit(
     input: &Path,
     cloud: Arc<crate::cloud::PointCloud>,
     template: Arc<Template>,
-    init: Init,
+    opts: RegistrationOptions,
     out: Option<&Path>,
     labels: Option<&Path>,
 ) -> Result<()> {
-    let opts = RegistrationOptions {
-        init,
-        ..Default::default()
-    };
     let mut reg = Registration::new(cloud.clone(), template.clone(), opts)
         .map_err(|e| Error::input(format!("{}: {e}", input.display())))?;
     let start = Instant::now();
@@ -183,11 +208,15 @@ pub fn fit(
             },
         )?;
     }
+    let base = match &fit.base {
+        Some(b) => format!(" (a base of {} points set aside)", b.points.len()),
+        None => String::new(),
+    };
     println!(
-        "{}: '{}' fitted to {} points in {} iterations, mean distance {:.6} ({:.3}% of the statue's size), {:.2} s",
+        "{}: '{}' fitted to {} points{base} in {} iterations, mean distance {:.6} ({:.3}% of the statue's size), {:.2} s",
         input.display(),
         template.name,
-        fit.labels.len(),
+        fit.labels.len() - fit.base.as_ref().map_or(0, |b| b.points.len()),
         fit.iterations,
         fit.mean_distance,
         100.0 * fit.mean_distance / cloud.scale_estimate().max(1e-30) as f64,

@@ -63,7 +63,7 @@ pub fn run(args: &Args) -> Result<()> {
     let (fitted, target) = target(args.fit, args.pose, args.proportions, args.template)?;
     let (cloud, estimated) = super::read_with_normals(args.input, args.drop_non_finite)?;
     let start = Instant::now();
-    let binding = Binding::new(&cloud, &fitted)
+    let binding = Binding::new_on_base(&cloud, &fitted)
         .map_err(|e| Error::input(format!("{}: cannot bind: {e}", args.input.display())))?;
     let bind_secs = start.elapsed().as_secs_f64();
     let start = Instant::now();

@@ -1,6 +1,7 @@
 //! Point clouds: the [`PointCloud`] container (structure of arrays), PLY input/output
-//! ([`ply`]) and normal estimation ([`normals`]).
+//! ([`ply`]), normal estimation ([`normals`]) and the statue's base ([`base`]).
 
+pub mod base;
 pub mod normals;
 pub mod ply;
 

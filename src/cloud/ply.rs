@@ -115,8 +115,8 @@
 //! [`write_ply`] writes a `binary_little_endian` PLY with one `vertex` element: `float x, y, z`;
 //! `float nx, ny, nz` when the cloud has normals; `uchar red, green, blue` when the cloud has
 //! colours and [`WriteOptions::colors`] is set; and optionally one `int` property per point
-//! named by [`WriteOptions::labels`] (e.g. `bone` labels of a registration; the name must be a
-//! PLY identifier that ply-rs reads back: a letter or `_`, then letters, digits, `_` or `-`).
+//! named by [`WriteOptions::labels`] (e.g. `bone` labels of a registration, where `u32::MAX`,
+//! "no bone", is written as `-1`; the name must be a PLY identifier that ply-rs reads back: a letter or `_`, then letters, digits, `_` or `-`).
 //! The header is written by ply-rs (`ply_rs::writer::Writer::write_header`, into memory,
 //! then passed on with one `write_all`: ply-rs uses `Write::write`, which may write only part
 //! of its input on other writers); the records are written by this module in chunks of about
@@ -1474,7 +1474,7 @@ pub struct WriteOptions {
     /// Write the cloud's colours (`uchar red, green, blue`) when it has some. Default: true.
     pub colors: bool,
     /// One extra `int` vertex property: its name (e.g. `"bone"`) and one value per point
-    /// (each at most `i32::MAX`).
+    /// (each at most `i32::MAX`, or `u32::MAX` for "none", written as `-1`).
     pub labels: Option<(String, Vec<u32>)>,
 }
 
@@ -1567,7 +1567,10 @@ fn validate(cloud: &PointCloud, options: &WriteOptions) -> Result<(), PlyProblem
                  digits, _ or -, and not a coordinate, normal or colour name)"
             )));
         }
-        if let Some(bad) = values.iter().find(|&&v| v > i32::MAX as u32) {
+        if let Some(bad) = values
+            .iter()
+            .find(|&&v| v > i32::MAX as u32 && v != u32::MAX)
+        {
             return Err(PlyProblem::Inconsistent(format!(
                 "label {bad} does not fit the PLY int type"
             )));
@@ -1663,6 +1666,7 @@ pub fn write_ply_to(
             buf.extend_from_slice(c);
         }
         if let Some(label) = labels.and_then(|(_, l)| l.get(i)) {
+            // `u32::MAX` ("none") becomes -1; the others fit (checked above).
             buf.extend_from_slice(&(*label as i32).to_le_bytes());
         }
         if buf.len() >= CHUNK {

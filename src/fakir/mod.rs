@@ -21,4 +21,4 @@ pub mod solver;
 pub mod world;
 
 pub use init::Init;
-pub use registration::{Fit, Progress, Registration, RegistrationOptions, register};
+pub use registration::{BASE_LABEL, Fit, Progress, Registration, RegistrationOptions, register};

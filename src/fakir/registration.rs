@@ -2,6 +2,10 @@
 //! budget, [`Registration::run_to_convergence`].
 //!
 //! ## Levels
+//! 0. **Base** (our addition; [`crate::cloud::base`]): a plinth under the figure is found
+//!    (option `base`), set aside, and the figure alone is registered; its top face's normal
+//!    becomes the up hint (it replaces a given hint within 30° of it: a scan tilted on its
+//!    plinth gets its true up). The base's points get [`BASE_LABEL`].
 //! 1. **Initialisation** ([`super::init`]): candidate placements, each tried with a short
 //!    registration on a small subsample; the best is kept.
 //! 2. **Level 0**: the whole-skeleton schedule ([`super::schedule`]) on a random subsample
@@ -40,6 +44,7 @@ use super::solver::{Activity, Cancelled, NoPause, Pause, Solver, SolverSettings,
 use super::world::WorldSkeleton;
 use crate::anatomy::{Skeleton, Template};
 use crate::cloud::PointCloud;
+use crate::cloud::base::{Base, BaseOptions, detect_base_stepwise};
 use crate::cloud::normals::{NormalOptions, estimate_normals};
 use crate::error::{Error, Result};
 use crate::math::Vec3;
@@ -71,6 +76,9 @@ pub struct RegistrationOptions {
     pub cone_slack: f32,
     /// Cone preference slack (fraction of the statue's size).
     pub cone_abs: f32,
+    /// Find a base (plinth) and register the figure without it (`None`: register every
+    /// point).
+    pub base: Option<BaseOptions>,
 }
 
 impl Default for RegistrationOptions {
@@ -87,6 +95,7 @@ impl Default for RegistrationOptions {
             schedule: ScheduleSettings::default(),
             cone_slack: 0.2,
             cone_abs: 0.002,
+            base: Some(BaseOptions::default()),
         }
     }
 }
@@ -109,14 +118,19 @@ pub struct Progress {
     pub done: bool,
 }
 
+/// Label of the base's points in [`Fit::labels`].
+pub const BASE_LABEL: u32 = u32::MAX;
+
 /// The result of a registration.
 #[derive(Clone, Debug)]
 pub struct Fit {
     pub skeleton: Skeleton,
-    /// Bone of every point of the cloud.
+    /// Bone of every point of the cloud ([`BASE_LABEL`] for the base's points).
     pub labels: Vec<u32>,
-    /// Mean distance of all points to their bones (thesis eq. 2.16).
+    /// Mean distance of the figure's points to their bones (thesis eq. 2.16).
     pub mean_distance: f64,
+    /// The base set aside, if one was found.
+    pub base: Option<Base>,
     /// Points per bone.
     pub bone_counts: Vec<usize>,
     /// Whole-skeleton iterations (level 0 + level 1).
@@ -129,14 +143,14 @@ pub struct Fit {
     pub candidate_distances: Vec<f64>,
 }
 
-/// Refuses clouds with fewer than 20 points per bone of the template.
-fn check_point_count(cloud: &PointCloud, template: &Template) -> Result<()> {
+/// Refuses clouds with fewer than 20 points per bone of the template (`what` names them).
+fn check_point_count(count: usize, template: &Template, what: &str) -> Result<()> {
     let min_points = 20 * template.bones.len();
-    if cloud.len() < min_points {
+    if count < min_points {
         return Err(Error::input(format!(
-            "too few points to fit the '{}' template: {} (at least {min_points} needed)",
+            "too few points to fit the '{}' template: {count} {what} (at least {min_points} \
+             needed)",
             template.name,
-            cloud.len()
         )));
     }
     Ok(())
@@ -144,7 +158,7 @@ fn check_point_count(cloud: &PointCloud, template: &Template) -> Result<()> {
 
 /// Checks a cloud for registration and returns its normals (estimated when absent).
 fn prepare(cloud: &PointCloud, template: &Template) -> Result<Vec<Vec3>> {
-    check_point_count(cloud, template)?;
+    check_point_count(cloud.len(), template, "points")?;
     if let Some(i) = cloud.positions.iter().position(|p| !p.is_finite()) {
         return Err(Error::input(format!(
             "point {i} has a non-finite coordinate"
@@ -219,16 +233,49 @@ pub fn register(
     opts: &RegistrationOptions,
     pause: &mut dyn Pause,
 ) -> Result<Fit> {
-    let normals = prepare(cloud, &template)?;
-    let positions = &cloud.positions;
+    let all_normals = prepare(cloud, &template)?;
+    // The set-up between solvers is cut into units too (none of them may hold a kiosk frame).
+    pause.unit(None).map_err(cancelled)?;
+    let base = match &opts.base {
+        Some(bo) => find_base(&cloud.positions, &all_normals, &opts.init, bo, pause)?,
+        None => None,
+    };
+    // The figure: every point, or those off the base (copied, in order).
+    let figure: Option<Vec<u32>> = base.as_ref().map(|b| {
+        let mask = b.mask(cloud.len());
+        (0..cloud.len() as u32)
+            .filter(|&i| !mask[i as usize])
+            .collect()
+    });
+    let (fig_positions, normals) = match &figure {
+        Some(f) => (
+            f.iter().map(|&i| cloud.positions[i as usize]).collect(),
+            f.iter().map(|&i| all_normals[i as usize]).collect(),
+        ),
+        None => (Vec::new(), all_normals),
+    };
+    let positions: &[Vec3] = match &figure {
+        Some(_) => &fig_positions,
+        None => &cloud.positions,
+    };
     let n = positions.len();
+    if figure.is_some() {
+        check_point_count(n, &template, "off the base")?;
+    }
+    let init = match (&opts.init, &base) {
+        (Init::Auto | Init::Up(_), Some(b)) => Init::Up(b.up),
+        (Init::Anchor { anchor, .. }, Some(b)) => Init::Anchor {
+            anchor: *anchor,
+            up: Some(b.up),
+        },
+        (i, _) => i.clone(),
+    };
     let nb = template.bones.len();
     let level0 = subsample(n, opts.subsample, opts.seed);
     let level0_points: Vec<Vec3> = level0.iter().map(|&i| positions[i as usize]).collect();
-    // The set-up between solvers is cut into units too (none of them may hold a kiosk frame).
     pause.unit(None).map_err(cancelled)?;
     // Candidates.
-    let cands: Vec<Candidate> = match &opts.init {
+    let cands: Vec<Candidate> = match &init {
         Init::Given(s) => {
             let scale = s.block_scale;
             vec![Candidate {
@@ -341,7 +388,7 @@ pub fn register(
     let mut best = finals.swap_remove(pick);
     let chosen = best.candidate;
     // Scale restarts of the chosen orientation (see `init`, step 7): the lowest score wins.
-    let pivot = match &opts.init {
+    let pivot = match &init {
         Init::Anchor { anchor, .. } => *anchor,
         _ => centroid(&level0_points),
     };
@@ -391,23 +438,48 @@ pub fn register(
     s.refresh().map_err(cancelled)?;
     s.activity.phase = "done";
     s.activity.fraction = 1.0;
-    let mut labels = vec![0u32; n];
-    for (k, &src) in s.assignment.source.iter().enumerate() {
-        labels[src as usize] = s.assignment.label[k];
-    }
+    let mut labels = vec![BASE_LABEL; cloud.len()];
     let mut bone_counts = vec![0usize; nb];
-    for &l in &labels {
+    for (k, &src) in s.assignment.source.iter().enumerate() {
+        let i = match &figure {
+            Some(f) => f[src as usize],
+            None => src,
+        };
+        let l = s.assignment.label[k];
+        labels[i as usize] = l;
         bone_counts[l as usize] += 1;
     }
     Ok(Fit {
         skeleton: s.world.to_skeleton(),
         labels,
         mean_distance: s.mean_distance(),
+        base,
         bone_counts,
         iterations,
         units: s.units,
         candidate: chosen,
         candidate_distances: distances,
+    })
+}
+
+/// The base of the statue (see [`crate::cloud::base`]), one direction per work unit: along
+/// the up hint of `init` if it has one, else along each principal direction.
+fn find_base(
+    positions: &[Vec3],
+    normals: &[Vec3],
+    init: &Init,
+    opts: &BaseOptions,
+    pause: &mut dyn Pause,
+) -> Result<Option<Base>> {
+    let hint = match init {
+        Init::Up(u) => Some(*u),
+        Init::Anchor { up, .. } => *up,
+        Init::Auto => None,
+        // A given skeleton carries its own orientation; its up is the root frame's.
+        Init::Given(s) => Some(s.root_rotation * Vec3::Y),
+    };
+    detect_base_stepwise(positions, normals, hint, opts, || {
+        pause.unit(None).map_err(cancelled)
     })
 }
 
@@ -550,7 +622,7 @@ impl Registration {
         template: Arc<Template>,
         opts: RegistrationOptions,
     ) -> Result<Self> {
-        check_point_count(&cloud, &template)?;
+        check_point_count(cloud.len(), &template, "points")?;
         Ok(Registration {
             cloud,
             template,

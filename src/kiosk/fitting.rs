@@ -153,8 +153,10 @@ fn step_fitting(
                 let cloud = cloud.0.clone();
                 let dir = settings.0.cache_dir.clone();
                 let key = key.0.clone();
+                // The base (plinth), when registration found one, stays put when posing.
+                let base = fit.base.map(|b| b.points).unwrap_or_default();
                 ec.insert(Pending::spawn(move || -> Result<Binding> {
-                    let b = Binding::new(&cloud, &skel)?;
+                    let b = Binding::new(&cloud, &skel)?.with_base(&base)?;
                     write_cache(&dir, &key, &skel, &b);
                     Ok(b)
                 }));

@@ -739,9 +739,10 @@ fn load_donor(
                     loaded.template.clone(),
                     &opts,
                     &mut CancelFlag(cancel),
-                )?
-                .skeleton;
-                let binding = Binding::new(&loaded.cloud, &fit)?;
+                )?;
+                let base = fit.base.map(|b| b.points).unwrap_or_default();
+                let fit = fit.skeleton;
+                let binding = Binding::new(&loaded.cloud, &fit)?.with_base(&base)?;
                 Ok((fit, binding))
             })?;
             write_cache(&cfg.cache_dir, &loaded.cache_key, &fit, &binding);
@@ -879,7 +880,7 @@ fn land(job: &Landing) -> Result<Hypothesis> {
     for &k in &part.bones {
         fit.bones[k] = tr.skeleton.bones[k];
     }
-    let binding = Binding::new(&cloud, &fit)?;
+    let binding = Binding::new_on_base(&cloud, &fit)?;
     let mut restored = base.restored.clone();
     restored.push((part_index, donor));
     Ok(Hypothesis {

@@ -167,7 +167,7 @@ pub fn restore(
                 continue;
             }
             if bindings[di].is_none() {
-                bindings[di] = Some(crate::skinning::Binding::new(d.cloud, d.fit)?);
+                bindings[di] = Some(crate::skinning::Binding::new_on_base(d.cloud, d.fit)?);
             }
             let binding = bindings[di].as_ref().expect("bound just above");
             match transfer(&completed, d.cloud, binding, part, &topts) {

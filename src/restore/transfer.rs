@@ -140,7 +140,12 @@ pub fn transfer(
     let donor_posed = donor_fit.pose();
     let mut keep = Vec::new();
     let mut margin = Vec::new();
+    // The donor's base (plinth) is not a limb, whatever bone it is bound to.
+    let mut on_base = binding.base().iter().peekable();
     for (i, &b) in labels.iter().enumerate() {
+        if on_base.next_if_eq(&&(i as u32)).is_some() {
+            continue;
+        }
         let b = b as usize;
         if part.bones.contains(&b) {
             keep.push(i);

@@ -13,6 +13,12 @@
 //! its chain successor, or to its only child; where a chain branches (shoulders on the spine's
 //! top, hips on the pelvis) the branching bone meets its parent at its own `c1` only.
 //!
+//! **The base** ([`Binding::with_base`]; our addition): the points of the statue's plinth
+//! ([`crate::cloud::base`]) are bound like the others, so the arrays stay one per point, but
+//! every deformation then puts them back where they stood, moved only by the root's rigid
+//! placement ([`Binding::place_base`]): a plinth neither bends with the feet nor follows a
+//! change of proportions.
+//!
 //! **Influence size** `ε'_r` of the joint between `B_p` and `B_k` (thesis §3.2.1):
 //! `ε'_r = 0.2 · max(r_j / 4, min(r_j, l_p − r_p1 − r_j, l_k − r_j − r_k2))` — the thesis'
 //! formula (the joint radius and the gaps between consecutive spheres) with a floor so that
@@ -103,6 +109,8 @@ pub struct Binding {
     pub(crate) hf: heightfield::Slots,
     /// Baseline skinning's rigid points (derived from `points`, not saved).
     pub(crate) bl_rigid: baseline::Rigid,
+    /// The base's points, increasing (see the module docs).
+    pub(crate) base: Vec<u32>,
 }
 
 /// One point's binding, before splitting into arrays.
@@ -224,7 +232,72 @@ impl Binding {
             bones,
             points,
             fit_grid_normals,
+            base: Vec::new(),
         })
+    }
+
+    /// The same binding with the points `base` (indices, e.g. [`crate::cloud::base::Base`]'s)
+    /// held as the statue's base (see the module docs). Errors: an index out of range.
+    pub fn with_base(mut self, base: &[u32]) -> Result<Binding> {
+        if let Some(&bad) = base.iter().find(|&&i| i as usize >= self.len()) {
+            return Err(Error::input(format!(
+                "base point {bad} is not one of the {} bound points",
+                self.len()
+            )));
+        }
+        let mut v = base.to_vec();
+        v.sort_unstable();
+        v.dedup();
+        self.base = v;
+        Ok(self)
+    }
+
+    /// [`Binding::new`] holding as base the plinth that [`crate::cloud::base::detect_base`]
+    /// finds along the fitted skeleton's up (its root frame's `+Y`): for fits that come
+    /// without their base (a `FIT.json`, a restorer's skeleton). A cloud without normals gets
+    /// no base.
+    pub fn new_on_base(cloud: &PointCloud, fitted: &Skeleton) -> Result<Binding> {
+        let b = Binding::new(cloud, fitted)?;
+        let Some(normals) = cloud.normals.as_deref() else {
+            return Ok(b);
+        };
+        let up = fitted.root_rotation * Vec3::Y;
+        match crate::cloud::base::detect_base(
+            &cloud.positions,
+            normals,
+            Some(up),
+            &crate::cloud::base::BaseOptions::default(),
+        ) {
+            Some(base) => b.with_base(&base.points),
+            None => Ok(b),
+        }
+    }
+
+    /// The base's points (increasing; empty without a base).
+    pub fn base(&self) -> &[u32] {
+        &self.base
+    }
+
+    /// Writes the base's points for `target`: their fitted positions and normals moved by the
+    /// rigid motion from the fitted root placement to the target's.
+    pub(crate) fn place_base(
+        &self,
+        target: &Skeleton,
+        positions: &mut [Vec3],
+        normals: &mut [Vec3],
+    ) {
+        if self.base.is_empty() {
+            return;
+        }
+        let f = &self.fitted;
+        let turn = (target.root_rotation * f.root_rotation.inverse()).normalize();
+        let pts = &self.points;
+        for &i in &self.base {
+            let i = i as usize;
+            positions[i] = target.root_position + turn * (pts.position[i] - f.root_position);
+            let frame = self.bones[pts.bone[i] as usize].frame;
+            normals[i] = turn * (frame * pts.normal[i]);
+        }
     }
 
     /// A binding from a fitted skeleton and its per-point arrays (the per-bone part and the
@@ -238,6 +311,7 @@ impl Binding {
             fitted,
             bones,
             points,
+            base: Vec::new(),
         }
     }
 

@@ -194,20 +194,11 @@ impl Binding {
                 baseline::deform(pts, &self.bl_rigid, frames, &scratch.tables, op, on);
             }
             Method::Heightfield => {
-                let t1 = std::time::Instant::now();
                 heightfield::build_tables(bones, frames, &self.hf, &mut scratch.hf);
-                if std::env::var_os("PYG_PHASES").is_some() {
-                    eprintln!("TMP hf tables {:?}", t1.elapsed());
-                }
                 heightfield::deform(&self.hf, &scratch.hf, op, on);
-                if std::env::var_os("PYG_REF").is_some() {
-                    let tb = &scratch.hf;
-                    run(op, on, |i| {
-                        heightfield::reference_point(i, pts, bones, frames, tb)
-                    });
-                }
             }
         }
+        self.place_base(target, op, on);
         Ok(())
     }
 
@@ -226,13 +217,10 @@ impl Binding {
             &mut nrm,
         )?;
         let (pts, bones, frames, tb) = (&self.points, &self.bones, &scratch.frames, &scratch.hf);
-        let fast = pos.clone();
         run(&mut pos, &mut nrm, |i| {
             heightfield::reference_point(i, pts, bones, frames, tb)
         });
-        if std::env::var_os("PYG_DBG").is_some() {
-            heightfield::debug_worst(pts, &self.hf, bones, frames, tb, &fast, &pos);
-        }
+        self.place_base(target, &mut pos, &mut nrm);
         Ok(PointCloud::with_normals(pos, nrm))
     }
 

@@ -1,9 +1,10 @@
 //! Saving and loading a [`Binding`] (so a kiosk starts at once on a statue it has seen).
 //!
-//! Format (little-endian): the magic `PYGBIND1`, the template name, the fitted skeleton's raw
+//! Format (little-endian): the magic `PYGBIND2`, the template name, the fitted skeleton's raw
 //! state (root position and rotation, block scale, per bone rotation, length and radii — raw
 //! `f32`s, so the reloaded skeleton is bit-identical), the point count, then every per-point
-//! array of [`super::binding::PointData`] in declaration order. The per-bone part and the
+//! array of [`super::binding::PointData`] in declaration order, then the base's point count
+//! (`u64`) and its indices (`u32`, increasing). The per-bone part and the
 //! fitted pose's baseline tables are recomputed from the skeleton (a pure function of it), so
 //! a reloaded binding deforms exactly like the original. The file is written to a temporary
 //! sibling and renamed; loading checks every index and count against the file's size and the
@@ -16,7 +17,7 @@ use crate::math::{Quat, Vec3};
 use std::path::Path;
 use std::sync::Arc;
 
-const MAGIC: &[u8; 8] = b"PYGBIND1";
+const MAGIC: &[u8; 8] = b"PYGBIND2";
 
 struct Writer(Vec<u8>);
 
@@ -128,6 +129,10 @@ impl Binding {
         w.f32s(&pts.bl_h);
         w.vec3s(&pts.bl_res);
         w.vec3s(&pts.bl_n);
+        w.u64(self.base.len() as u64);
+        for &i in &self.base {
+            w.u32(i);
+        }
         let tmp = path.with_extension("tmp-binding");
         std::fs::write(&tmp, &w.0)
             .and_then(|_| std::fs::rename(&tmp, path))
@@ -226,10 +231,19 @@ impl Binding {
         pts.bl_h = r.f32s(n)?;
         pts.bl_res = r.vec3s(n)?;
         pts.bl_n = r.vec3s(n)?;
+        let nbase = r.u64()?;
+        if nbase > n as u64 {
+            return Err(r.err("more base points than points"));
+        }
+        let base: Vec<u32> = (0..nbase).map(|_| r.u32()).collect::<Result<_>>()?;
+        if base.windows(2).any(|w| w[0] >= w[1]) || base.last().is_some_and(|&i| i as usize >= n) {
+            return Err(r.err("base indices out of order or out of range"));
+        }
         if r.at != bytes.len() {
             return Err(r.err("trailing bytes"));
         }
-        let b = Binding::from_parts(fitted, pts);
+        let mut b = Binding::from_parts(fitted, pts);
+        b.base = base;
         b.validate().map_err(|m| r.err(&m))?;
         Ok(b)
     }

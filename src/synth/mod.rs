@@ -29,6 +29,13 @@
 //!   coordinates); a bone cut removes every point of the bone's descendants and the points of
 //!   the bone beyond the plane orthogonal to it at fraction `at` of its length.
 //! * **Rigid transform**: a uniformly random rotation and a translation of up to one height.
+//! * **Plinth** (our addition, for [`crate::cloud::base`]): a box under the figure, as museum
+//!   scans have. Its top touches the lowest point of the figure along the template's up
+//!   (`+Y`, carried by the rigid transform); its footprint covers the figure's lowest tenth
+//!   of the height plus `0.06 × height` on each side (half-widths at least `0.12 × height`);
+//!   it is `0.08 × height` high. Its five outer faces and its bottom are sampled
+//!   area-uniformly with `plinth_share × points` points, labelled [`PLINTH_LABEL`], after the
+//!   noise and the cuts (a plinth is neither noisy nor broken here).
 //!
 //! Everything is deterministic for a seed (one sequential [`Rng`] stream).
 
@@ -115,7 +122,13 @@ pub struct SynthOptions {
     pub cuts: Vec<Cut>,
     /// Apply a random rigid transform to the statue and its skeleton.
     pub rigid: bool,
+    /// Points of a plinth under the figure, as a share of `points` (0: no plinth; see the
+    /// module docs).
+    pub plinth_share: f32,
 }
+
+/// Label of the plinth's points in [`SynthStatue::labels`].
+pub const PLINTH_LABEL: u32 = u32::MAX;
 
 impl Default for SynthOptions {
     fn default() -> Self {
@@ -129,6 +142,7 @@ impl Default for SynthOptions {
             poisson_lambda: 0.0,
             cuts: Vec::new(),
             rigid: false,
+            plinth_share: 0.0,
         }
     }
 }
@@ -140,7 +154,8 @@ pub struct SynthStatue {
     pub cloud: PointCloud,
     /// The skeleton the points were sampled from.
     pub truth: Skeleton,
-    /// For each point, the index of the bone it was sampled on.
+    /// For each point, the index of the bone it was sampled on ([`PLINTH_LABEL`] on the
+    /// plinth).
     pub labels: Vec<u32>,
     /// The rigid transform applied (identity when `rigid` was off).
     pub rigid: (Quat, Vec3),
@@ -162,6 +177,11 @@ pub fn generate(template: Arc<Template>, opts: &SynthOptions) -> Result<SynthSta
     }
     if !(opts.noise_sigma >= 0.0 && opts.poisson_lambda >= 0.0) {
         return Err(Error::input("noise levels must be ≥ 0"));
+    }
+    if !(0.0..=4.0).contains(&opts.plinth_share) {
+        return Err(Error::input(
+            "the plinth's share of points must be in [0, 4]",
+        ));
     }
     let mut rng = Rng::new(opts.seed);
     let mut skel = Skeleton::rest(template.clone());
@@ -203,6 +223,18 @@ pub fn generate(template: Arc<Template>, opts: &SynthOptions) -> Result<SynthSta
         &mut normals,
         &mut labels,
     )?;
+    let plinth = (opts.plinth_share * opts.points as f32).round() as usize;
+    if plinth > 0 && !positions.is_empty() {
+        let up = rigid.0 * Vec3::Y;
+        let frame = (rigid.0 * Vec3::X, up, rigid.0 * Vec3::Z);
+        add_plinth(
+            frame,
+            opts.height,
+            plinth,
+            &mut rng,
+            (&mut positions, &mut normals, &mut labels),
+        );
+    }
     Ok(SynthStatue {
         cloud: PointCloud::with_normals(positions, normals),
         truth: skel,
@@ -232,6 +264,70 @@ fn displace_along_normals(
             d += rng.poisson(lambda) as f32 - lambda;
         }
         *p += d * *n;
+    }
+}
+
+/// Adds a plinth of `count` points under the figure (see the module docs); `frame` holds the
+/// statue's x, up and z axes.
+fn add_plinth(
+    frame: (Vec3, Vec3, Vec3),
+    height: f32,
+    count: usize,
+    rng: &mut Rng,
+    (positions, normals, labels): (&mut Vec<Vec3>, &mut Vec<Vec3>, &mut Vec<u32>),
+) {
+    let (ex, up, ez) = frame;
+    let low = positions
+        .iter()
+        .map(|p| p.dot(up))
+        .fold(f32::INFINITY, f32::min);
+    let (mut x0, mut x1, mut z0, mut z1) = (
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+    );
+    for p in positions.iter().filter(|p| p.dot(up) < low + 0.1 * height) {
+        x0 = x0.min(p.dot(ex));
+        x1 = x1.max(p.dot(ex));
+        z0 = z0.min(p.dot(ez));
+        z1 = z1.max(p.dot(ez));
+    }
+    let (cx, cz) = (0.5 * (x0 + x1), 0.5 * (z0 + z1));
+    let hx = (0.5 * (x1 - x0) + 0.06 * height).max(0.12 * height);
+    let hz = (0.5 * (z1 - z0) + 0.06 * height).max(0.12 * height);
+    let hy = 0.04 * height;
+    let centre = ex * cx + ez * cz + up * (low - hy);
+    // Faces: (normal, first edge half-vector, second edge half-vector).
+    let faces = [
+        (up, ex * hx, ez * hz),
+        (-up, ex * hx, ez * hz),
+        (ex, up * hy, ez * hz),
+        (-ex, up * hy, ez * hz),
+        (ez, ex * hx, up * hy),
+        (-ez, ex * hx, up * hy),
+    ];
+    let offsets = [hy, hy, hx, hx, hz, hz];
+    let areas: Vec<f32> = faces
+        .iter()
+        .map(|(_, a, b)| 4.0 * a.length() * b.length())
+        .collect();
+    let total: f32 = areas.iter().sum();
+    for _ in 0..count {
+        let mut r = rng.f32() * total;
+        let mut f = faces.len() - 1;
+        for (k, a) in areas.iter().enumerate() {
+            if r < *a {
+                f = k;
+                break;
+            }
+            r -= a;
+        }
+        let (n, a, b) = faces[f];
+        let p = centre + n * offsets[f] + a * rng.range(-1.0, 1.0) + b * rng.range(-1.0, 1.0);
+        positions.push(p);
+        normals.push(n);
+        labels.push(PLINTH_LABEL);
     }
 }
 
