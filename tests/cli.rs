@@ -289,3 +289,21 @@ fn repose_picture_and_film_write_what_they_promise() {
     );
     assert!(!bad.exists());
 }
+
+#[cfg(unix)]
+#[test]
+fn printing_into_a_closed_pipe_ends_quietly() {
+    use std::process::{Command, Stdio};
+    // `pygmalion info X | head -0`: the reader is gone before the first line is printed.
+    let statue = crate::common::statues_dir().join("statue_dancing_faun_pompeii.ply");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_pygmalion"))
+        .args(["info", statue.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
