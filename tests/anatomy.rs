@@ -374,3 +374,12 @@ fn constraints_and_rigid_motion() {
         assert!(((q * *a + tr) - *b).length() < 1e-4);
     }
 }
+
+#[test]
+fn a_skeletons_up_is_the_templates_up_carried_by_its_root() {
+    let mut s = Skeleton::rest(human());
+    assert!((s.up() - Vec3::Y).length() < 1e-6);
+    let q = Quat::from_axis_angle(Vec3::new(1.0, 0.2, -0.5).normalize(), 0.8);
+    s.transform_rigid(q, Vec3::new(3.0, -1.0, 2.0));
+    assert!((s.up() - q * Vec3::Y).length() < 1e-5);
+}

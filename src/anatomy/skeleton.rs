@@ -198,6 +198,12 @@ impl Skeleton {
         }
     }
 
+    /// The statue's up as the skeleton carries it: the template's `+Y` in the root's frame
+    /// (the up of a figure standing like the rest pose).
+    pub fn up(&self) -> Vec3 {
+        self.root_rotation * Vec3::Y
+    }
+
     /// A world-space rigid motion of the whole skeleton: `x ↦ rotation · x + translation`.
     pub fn transform_rigid(&mut self, rotation: Quat, translation: Vec3) {
         self.root_position = rotation * self.root_position + translation;

@@ -71,7 +71,7 @@ fn read_with_normals(input: &Path) -> Result<PointCloud> {
 /// The camera for a set of clouds seen from the fitted statue's front (or along −Z).
 fn camera_for(clouds: &[&[Vec3]], fitted: Option<&Skeleton>, aspect: f32, turn: f32) -> Camera {
     let (front, up) = match fitted {
-        Some(s) => (s.root_rotation * Vec3::Z, s.root_rotation * Vec3::Y),
+        Some(s) => (s.root_rotation * Vec3::Z, s.up()),
         None => (Vec3::Z, Vec3::Y),
     };
     let (front, up) = if turn != 0.0 {

@@ -72,6 +72,8 @@ pub struct BaseReport {
     pub up: [f32; 3],
     /// Height of the top face along `up` (`p·up`).
     pub top: f32,
+    /// The base is every point with `p·up` below this (the top plus a margin).
+    pub cut: f32,
     /// Its points.
     pub points: usize,
 }
@@ -101,6 +103,7 @@ impl FitReport {
             base: fit.base.as_ref().map(|b| BaseReport {
                 up: b.up.to_array(),
                 top: b.top,
+                cut: b.cut,
                 points: b.points.len(),
             }),
         }

@@ -476,7 +476,7 @@ fn find_base(
         Init::Anchor { up, .. } => *up,
         Init::Auto => None,
         // A given skeleton carries its own orientation; its up is the root frame's.
-        Init::Given(s) => Some(s.root_rotation * Vec3::Y),
+        Init::Given(s) => Some(s.up()),
     };
     detect_base_stepwise(positions, normals, hint, opts, || {
         pause.unit(None).map_err(cancelled)

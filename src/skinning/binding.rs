@@ -261,7 +261,7 @@ impl Binding {
         let Some(normals) = cloud.normals.as_deref() else {
             return Ok(b);
         };
-        let up = fitted.root_rotation * Vec3::Y;
+        let up = fitted.up();
         match crate::cloud::base::detect_base(
             &cloud.positions,
             normals,
