@@ -825,12 +825,13 @@ fn posed_statues_registration() {
         errors.push(err);
     }
     // A regression guard, not the issue's target (90% of statues under 2%, measured over 32
-    // statues in the issue notes): no failure beyond 5%, and at least five of six under 2%.
-    // Measured with the scale restarts and two level-1 iterations: 0.65, 0.84, 1.71, 1.68,
-    // 0.79, 0.69% (before both: 0.65, 0.80, 1.89, 1.43, 6.19, 6.39%).
-    assert!(errors.iter().all(|e| *e < 0.05), "joint errors {errors:?}");
-    let good = errors.iter().filter(|e| **e < 0.02).count();
-    assert!(good >= 5, "only {good} of 6 under 2%: {errors:?}");
+    // statues in the issue notes): every one of the six under 2%, their mean under 1%.
+    // Measured with the refits: 0.28, 0.74, 0.69, 1.68, 0.41, 0.43% (mean 0.71%); before
+    // them, with the scale restarts and two level-1 iterations: 0.65, 0.84, 1.71, 1.68, 0.79,
+    // 0.69%; before those: 0.65, 0.80, 1.89, 1.43, 6.19, 6.39%.
+    assert!(errors.iter().all(|e| *e < 0.02), "joint errors {errors:?}");
+    let mean = errors.iter().sum::<f32>() / errors.len() as f32;
+    assert!(mean < 0.01, "mean joint error {mean}: {errors:?}");
 }
 
 #[test]

@@ -570,8 +570,13 @@ impl FullRun<'_> {
         s.activity.fraction = fraction;
         s.activity.span = (fraction, fraction);
         s.activity.phase = "setup";
+        // Starting a solver (its k-d tree) is a unit of its own, as in every other set-up.
+        s.unit().map_err(cancelled)?;
         s.refresh().map_err(cancelled)?;
-        Ok(s.mean_distance() + s.occupancy())
+        let score = s.mean_distance() + s.occupancy();
+        // The score is a unit of its own (a refit's set-up follows).
+        s.unit().map_err(cancelled)?;
+        Ok(score)
     }
 
     /// Level 1 (clouds larger than the level-0 subsample): the assignment redone on all
