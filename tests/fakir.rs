@@ -796,15 +796,19 @@ fn sphere_directions_cover_the_sphere_evenly() {
     }
 }
 
-#[test]
-fn registration_of_posed_statues_with_stylised_proportions() {
-    // On a pool of its own, so the kiosk's frame-budget test running beside it does not queue
-    // behind this registration's parallel loops.
-    let pool = rayon::ThreadPoolBuilder::new()
+/// Runs `f` on a rayon pool of one thread of its own, so the kiosk's frame-budget test running
+/// beside a long registration does not queue behind its parallel loops.
+fn on_one_thread(f: impl FnOnce() + Send) {
+    rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
-        .unwrap();
-    pool.install(posed_statues_registration);
+        .unwrap()
+        .install(f)
+}
+
+#[test]
+fn registration_of_posed_statues_with_stylised_proportions() {
+    on_one_thread(posed_statues_registration);
 }
 
 fn posed_statues_registration() {
@@ -836,11 +840,7 @@ fn posed_statues_registration() {
 
 #[test]
 fn refits_lower_the_mean_distance_of_posed_statues() {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .unwrap();
-    pool.install(refits_comparison);
+    on_one_thread(refits_comparison);
 }
 
 fn refits_comparison() {
@@ -1002,11 +1002,7 @@ fn a_rescaled_candidate_keeps_its_orientation_and_scales_about_the_pivot() {
 
 #[test]
 fn registration_sets_a_plinth_aside_and_fits_the_figure_on_it() {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .unwrap();
-    pool.install(plinth_registration);
+    on_one_thread(plinth_registration);
 }
 
 fn plinth_registration() {

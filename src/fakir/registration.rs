@@ -555,6 +555,26 @@ struct FullFit {
 }
 
 impl FullRun<'_> {
+    /// A solver for `world` on the level-0 points, its progress at `fraction` within `span`,
+    /// after the set-up unit (building the solver's k-d tree is a unit of its own).
+    fn start<'p>(
+        &self,
+        world: WorldSkeleton,
+        scale: f32,
+        pause: &'p mut dyn Pause,
+        fraction: f32,
+        span: (f32, f32),
+    ) -> Result<Solver<'p>> {
+        let a0 = assignment_of(self.positions, self.normals, self.idx, self.nb, self.params);
+        let mut s = Solver::new(world, a0, scale, self.opts.solver.clone(), pause);
+        s.free_root = self.free_root;
+        s.activity.fraction = fraction;
+        s.activity.span = span;
+        s.activity.phase = "setup";
+        s.unit().map_err(cancelled)?;
+        Ok(s)
+    }
+
     /// The two-sided score (mean distance + occupancy) of `world` on the level-0 points (the
     /// progress stays at `fraction`).
     fn score(
@@ -564,14 +584,7 @@ impl FullRun<'_> {
         pause: &mut dyn Pause,
         fraction: f32,
     ) -> Result<f64> {
-        let a0 = assignment_of(self.positions, self.normals, self.idx, self.nb, self.params);
-        let mut s = Solver::new(world.clone(), a0, scale, self.opts.solver.clone(), pause);
-        s.free_root = self.free_root;
-        s.activity.fraction = fraction;
-        s.activity.span = (fraction, fraction);
-        s.activity.phase = "setup";
-        // Starting a solver (its k-d tree) is a unit of its own, as in every other set-up.
-        s.unit().map_err(cancelled)?;
+        let mut s = self.start(world.clone(), scale, pause, fraction, (fraction, fraction))?;
         s.refresh().map_err(cancelled)?;
         let score = s.mean_distance() + s.occupancy();
         // The score is a unit of its own (a refit's set-up follows).
@@ -596,14 +609,8 @@ impl FullRun<'_> {
         span: (f32, f32),
     ) -> Result<(Solver<'p>, usize)> {
         let n = self.positions.len();
-        let a0 = assignment_of(self.positions, self.normals, self.idx, self.nb, self.params);
-        let mut s = Solver::new(world, a0, scale, self.opts.solver.clone(), pause);
-        s.free_root = self.free_root;
-        s.units = units;
-        s.activity.fraction = fraction;
-        s.activity.span = span;
-        s.activity.phase = "setup";
-        s.unit().map_err(cancelled)?;
+        let mut s = self.start(world, scale, pause, fraction, span)?;
+        s.units += units;
         let mut done = 0;
         // (No refresh on the level-0 points first: level 1 replaces the assignment and its
         // schedule refreshes it whole, and without a level 1 the caller's final refresh is the
@@ -643,19 +650,8 @@ impl FullRun<'_> {
         fraction: &mut f32,
         span: (f32, f32),
     ) -> Result<FullFit> {
-        let a0 = assignment_of(self.positions, self.normals, self.idx, self.nb, self.params);
-        let mut s = Solver::new(
-            WorldSkeleton::from_skeleton(&c.skeleton),
-            a0,
-            c.scale,
-            self.opts.solver.clone(),
-            pause,
-        );
-        s.free_root = self.free_root;
-        s.activity.fraction = *fraction;
-        s.activity.span = span;
-        s.activity.phase = "setup";
-        s.unit().map_err(cancelled)?;
+        let world = WorldSkeleton::from_skeleton(&c.skeleton);
+        let mut s = self.start(world, c.scale, pause, *fraction, span)?;
         let iterations = register_skeleton(&mut s, &self.opts.schedule, true).map_err(cancelled)?;
         *fraction = s.activity.fraction;
         let score = s.mean_distance() + s.occupancy();
