@@ -77,8 +77,8 @@ pub struct RegistrationOptions {
     pub finalists: usize,
     /// Scale factors of the scale restarts (empty: none; see [`super::init`], step 7).
     pub rescales: Vec<f32>,
-    /// Refits of the chosen level-0 fit (level 3 in the module docs): at most this many
-    /// fresh registrations started from it, each kept only when it scores lower.
+    /// Refits of the fit (level 5 in the module docs): at most this many fresh level-0
+    /// registrations started from it, each kept only when it scores lower.
     pub refits: usize,
     /// Seed of the subsampling.
     pub seed: u64,
@@ -433,44 +433,38 @@ pub fn register(
     )?;
     iterations += its;
     for round in 1..rounds {
-        let (start, units) = (s.world.clone(), s.units);
+        // The fit's solver is kept (its level-1 assignment is still good if the refit is
+        // dropped); its pause hook runs the refit meanwhile.
+        let Some(hook) = s.take_pause() else { break };
+        let start = s.world.clone();
         fraction = s.activity.fraction;
-        drop(s);
-        let current = full.score(&start, start.block_scale, pause, fraction)?;
+        let current = full.score(&start, start.block_scale, hook, fraction)?;
         let c = Candidate {
             skeleton: start.to_skeleton(),
             scale: start.block_scale,
         };
         let sp = span(level1_start, 1.0, round, rounds);
         let half = (sp.0, 0.5 * (sp.0 + sp.1));
-        let r = full.run(chosen, &c, pause, &mut fraction, half)?;
+        let r = full.run(chosen, &c, hook, &mut fraction, half)?;
         if r.score < current {
             iterations += r.iterations;
-            let (world, units) = (r.world, units + r.units);
+            let units = s.units + r.units;
             let (next, its) = full.level1(
-                world,
+                r.world,
                 c.scale,
                 units,
                 opts.final_iterations,
-                pause,
+                hook,
                 fraction,
                 (half.1, sp.1),
             )?;
             s = next;
             iterations += its;
         } else {
-            // Not better: back to the fit before it, as it was.
-            s = full
-                .level1(
-                    start,
-                    scale,
-                    units + r.units,
-                    0,
-                    pause,
-                    fraction,
-                    (sp.0, 1.0),
-                )?
-                .0;
+            // Not better: the fit before it stays, as it was.
+            s.units += r.units;
+            s.activity.fraction = s.activity.fraction.max(fraction);
+            s.give_pause(hook);
             break;
         }
     }

@@ -200,6 +200,18 @@ impl<'p> Solver<'p> {
         r
     }
 
+    /// Takes the pause hook out of the solver (its units then never pause), so the caller can
+    /// run other solvers with it and keep this one, assignment and cached distances included
+    /// (the registration's refits); [`Solver::give_pause`] puts it back.
+    pub fn take_pause(&mut self) -> Option<&'p mut dyn Pause> {
+        self.pause.take()
+    }
+
+    /// Puts back a pause hook taken by [`Solver::take_pause`].
+    pub fn give_pause(&mut self, pause: &'p mut dyn Pause) {
+        self.pause = Some(pause);
+    }
+
     /// Replaces the assignment (e.g. moving to all points) and forgets cached distances.
     pub fn set_assignment(&mut self, a: Assignment) {
         self.assignment = a;
