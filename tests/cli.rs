@@ -69,6 +69,9 @@ fn info_synth_normals_and_register_write_what_they_promise() {
             .is_some_and(|a| a.len() == 3)
     );
     assert_eq!(v["bones"].as_array().unwrap().len(), 22);
+    // A complete statue: every bone's support, no lost limb.
+    assert_eq!(v["support"].as_array().unwrap().len(), 22);
+    assert_eq!(v["missing"].as_array().map(|a| a.len()), Some(0));
     assert!(
         v["mean_distance"]
             .as_f64()

@@ -2,9 +2,9 @@
 //! synthetic statues whose skeletons are known, so what is measured is the restoration itself.
 
 use pygmalion::anatomy::Template;
+use pygmalion::fakir::support::support;
 use pygmalion::geometry::Bone;
 use pygmalion::math::Vec3;
-use pygmalion::restore::support::support;
 use pygmalion::restore::transfer::PoseSource;
 use pygmalion::restore::{Donor, FROM_TARGET, RestoreOptions, restore};
 use pygmalion::rng::Rng;

@@ -486,3 +486,50 @@ fn a_base_stays_where_it_stands_and_follows_only_the_root_placement() {
             .is_err()
     );
 }
+
+#[test]
+fn lost_bones_bind_no_point() {
+    // A broken statue's lost limbs (registration level 6) are completed to a plausible pose
+    // that may pass through parts that are there: no point may follow them.
+    let (cloud, skel) = human(7, 20_000);
+    let t = skel.template.clone();
+    let all = Binding::new(&cloud, &skel).unwrap();
+    let lost: Vec<bool> = t
+        .bones
+        .iter()
+        .map(|b| b.name == "l_forearm" || b.name == "l_hand")
+        .collect();
+    let ids: Vec<u16> = (0..t.bones.len())
+        .filter(|&b| lost[b])
+        .map(|b| b as u16)
+        .collect();
+    let on_lost = all.points().bone.iter().filter(|b| ids.contains(b)).count();
+    assert!(on_lost > 500, "the forearm and hand hold {on_lost} points");
+    let without = Binding::new_without(&cloud, &skel, &lost).unwrap();
+    let p = without.points();
+    assert!(
+        p.bone.iter().all(|b| !ids.contains(b)),
+        "a point bound to a lost bone"
+    );
+    assert!(
+        p.partner
+            .iter()
+            .zip(&p.weight)
+            .all(|(m, w)| !ids.contains(m) || *w == 0.0),
+        "a point blended with a lost bone"
+    );
+    // The other points keep their bones, and the fitted pose gives every point back.
+    let same = all
+        .points()
+        .bone
+        .iter()
+        .zip(&p.bone)
+        .filter(|(a, b)| !ids.contains(a) && a == b)
+        .count();
+    assert_eq!(same, cloud.len() - on_lost);
+    for m in Method::ALL {
+        let out = without.deform_cloud(&skel, m).unwrap();
+        let d = max_dist(&out.positions, &cloud.positions);
+        assert!(d <= 1e-5, "{m}: a point moved by {d} (height 1)");
+    }
+}

@@ -63,6 +63,13 @@ pub struct FitReport {
     /// The base (plinth) set aside, if one was found; its points are labelled
     /// `4294967295` (`u32::MAX`) in `--labels`.
     pub base: Option<BaseReport>,
+    /// Bones of lost limbs: completed to their expected size and pose (the healthy mirror
+    /// limb's, or the template's), no point assigned.
+    pub missing: Vec<String>,
+    /// Bones only partly covered by the scan (a limb broken part-way along them).
+    pub partial: Vec<String>,
+    /// The support of every bone: covered share of its surface, axial reach.
+    pub support: Vec<crate::fakir::support::BoneSupport>,
 }
 
 /// The base in `FIT.json`.
@@ -106,6 +113,21 @@ impl FitReport {
                 cut: b.cut,
                 points: b.points.len(),
             }),
+            missing: t
+                .bones
+                .iter()
+                .zip(&fit.missing)
+                .filter(|(_, m)| **m)
+                .map(|(b, _)| b.name.clone())
+                .collect(),
+            partial: fit
+                .support
+                .iter()
+                .zip(&fit.missing)
+                .filter(|(s, m)| s.partial && !**m)
+                .map(|(s, _)| s.bone.clone())
+                .collect(),
+            support: fit.support.clone(),
         }
     }
 }
@@ -215,8 +237,20 @@ pub fn fit(
         Some(b) => format!(" (a base of {} points set aside)", b.points.len()),
         None => String::new(),
     };
+    let lost: Vec<&str> = template
+        .bones
+        .iter()
+        .zip(&fit.missing)
+        .filter(|(_, m)| **m)
+        .map(|(b, _)| b.name.as_str())
+        .collect();
+    let lost = if lost.is_empty() {
+        String::new()
+    } else {
+        format!(", missing: {}", lost.join(", "))
+    };
     println!(
-        "{}: '{}' fitted to {} points{base} in {} iterations, mean distance {:.6} ({:.3}% of the statue's size), {:.2} s",
+        "{}: '{}' fitted to {} points{base} in {} iterations, mean distance {:.6} ({:.3}% of the statue's size){lost}, {:.2} s",
         input.display(),
         template.name,
         fit.labels.len() - fit.base.as_ref().map_or(0, |b| b.points.len()),

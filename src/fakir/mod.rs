@@ -10,6 +10,7 @@
 //! | joint-range and proportion priors | [`lm`] ([`lm::RangePrior`]) |
 //! | Algorithm 1 on a chain; whole-skeleton order with backtracking | [`schedule`] |
 //! | automatic initial placement (PCA, candidate orientations) | [`init`] |
+//! | which bones the scan covers (support), lost limbs and their completion | [`support`] |
 //! | levels, the resumable `step(budget)` registration | [`registration`] |
 
 pub mod assign;
@@ -18,6 +19,7 @@ pub mod lm;
 pub mod registration;
 pub mod schedule;
 pub mod solver;
+pub mod support;
 pub mod world;
 
 pub use init::Init;

@@ -219,10 +219,14 @@ pub fn register_skeleton(
             s.activity.chain = Some(chain.name.clone());
             s.activity
                 .advance((it as f32 + ci as f32 / chains as f32) / iterations_max as f32);
-            if it == 0 && fresh {
-                chain_initial_pass(s, &chain.bones)?;
+            // A lost limb is fitted up to where it broke.
+            let bones = s.present_prefix(&chain.bones);
+            if it == 0 && fresh && !bones.is_empty() {
+                chain_initial_pass(s, bones)?;
             }
-            chain_passes(s, &chain.bones, settings, true)?;
+            if !bones.is_empty() {
+                chain_passes(s, bones, settings, true)?;
+            }
             if ci == 0 {
                 s.block()?;
             }

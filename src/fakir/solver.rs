@@ -28,7 +28,7 @@ pub struct Cancelled;
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct Activity {
     /// Phase name: "setup" (between solvers), "initialisation", "seeding", "assignment",
-    /// "block", "chain", "done".
+    /// "block", "chain", "support" (which bones the scan covers, registration level 6), "done".
     pub phase: &'static str,
     /// Chain being registered.
     pub chain: Option<String>,
@@ -140,6 +140,9 @@ pub struct Solver<'p> {
     pub free_root: bool,
     /// The template's trunk bones ([`trunk_bones`]), which carry the occupancy term.
     trunk: Vec<bool>,
+    /// Bones of a limb the statue has lost ([`Solver::set_absent`]): they take no points and
+    /// the schedule does not fit them.
+    pub absent: Vec<bool>,
     pause: Option<&'p mut dyn Pause>,
 }
 
@@ -181,11 +184,90 @@ impl<'p> Solver<'p> {
             units: 0,
             free_root: false,
             trunk,
+            absent: vec![false; n],
             tree,
             tree_points,
             spacing,
             pause: Some(pause),
         }
+    }
+
+    /// Marks the bones of lost limbs (`absent[b]`): the assignment stops giving them points
+    /// (every point is relabelled, in slices of at most [`MAX_REFRESH_SLICE`] points, one work
+    /// unit each) and the schedule leaves them where they are
+    /// ([`Solver::present_prefix`]).
+    pub fn set_absent(&mut self, absent: &[bool]) -> Result<(), Cancelled> {
+        self.absent = absent.to_vec();
+        for (b, &a) in absent.iter().enumerate() {
+            self.assignment.enabled[b] = !a;
+        }
+        let n = self.assignment.len();
+        for start in (0..n).step_by(MAX_REFRESH_SLICE) {
+            self.assignment
+                .relabel(start..(start + MAX_REFRESH_SLICE).min(n));
+            self.unit()?;
+        }
+        self.members = self.assignment.members();
+        Ok(())
+    }
+
+    /// What the points of bone `b`'s subtree would lose if the subtree were gone: the mean, over at most
+    /// [`EXCESS_POINTS`] of its points (a fixed stride), of how much farther each lies from
+    /// the nearest other bone (normal-constrained distance, lost bones excluded) than from
+    /// its own. `None` when the subtree holds no point. A limb bone that FAKIR laid over
+    /// another part — the hand of a forearm cut at the wrist folded back onto the upper arm —
+    /// costs almost nothing to remove; a real limb costs about its own thickness.
+    pub fn removal_excess(&self, b: usize, lost: &[bool]) -> Option<f64> {
+        let t = &self.world.template;
+        let gone: Vec<usize> = t.subtree(b);
+        let mut members: Vec<u32> = gone
+            .iter()
+            .flat_map(|&x| self.members[x].iter().copied())
+            .collect();
+        if members.is_empty() {
+            return None;
+        }
+        members.sort_unstable();
+        let stride = members.len().div_ceil(EXCESS_POINTS).max(1);
+        let bones = self.world.bones();
+        let others: Vec<PreparedBone> = (0..bones.len())
+            .filter(|x| !gone.contains(x) && !lost[*x])
+            .map(|x| bones[x].prepare())
+            .collect();
+        if others.is_empty() {
+            return None;
+        }
+        let a = &self.assignment;
+        let sample: Vec<u32> = members.into_iter().step_by(stride).collect();
+        let excess: f64 = sample
+            .par_chunks(256)
+            .map(|chunk| {
+                chunk
+                    .iter()
+                    .map(|&i| {
+                        let i = i as usize;
+                        let (p, n) = (a.positions[i], a.normals[i]);
+                        let near = others
+                            .iter()
+                            .map(|o| o.project_constrained(p, n).distance)
+                            .fold(f32::INFINITY, f32::min);
+                        (near - a.own_distance(i)).max(0.0) as f64
+                    })
+                    .sum::<f64>()
+            })
+            .collect::<Vec<f64>>()
+            .iter()
+            .sum();
+        Some(excess / sample.len() as f64)
+    }
+
+    /// The bones of `chain` up to its first absent bone (a lost limb ends where it broke).
+    pub fn present_prefix<'c>(&self, chain: &'c [usize]) -> &'c [usize] {
+        let end = chain
+            .iter()
+            .position(|&b| self.absent[b])
+            .unwrap_or(chain.len());
+        &chain[..end]
     }
 
     /// Marks the end of a work unit and lets the pause hook act.
@@ -696,6 +778,9 @@ impl<'p> Solver<'p> {
         self.seed_chain(&[b], &trusted)
     }
 }
+
+/// Points of a subtree that [`Solver::removal_excess`] examines.
+pub const EXCESS_POINTS: usize = 2048;
 
 /// Points a chain's seeding scores (a fixed stride over the assignment).
 pub const SEED_POINTS: usize = 1500;

@@ -155,8 +155,10 @@ fn step_fitting(
                 let key = key.0.clone();
                 // The base (plinth), when registration found one, stays put when posing.
                 let base = fit.base.map(|b| b.points).unwrap_or_default();
+                // Lost limbs (completed by the registration) bind no point.
+                let lost = fit.missing;
                 ec.insert(Pending::spawn(move || -> Result<Binding> {
-                    let b = Binding::new(&cloud, &skel)?.with_base(&base)?;
+                    let b = Binding::new_without(&cloud, &skel, &lost)?.with_base(&base)?;
                     write_cache(&dir, &key, &skel, &b);
                     Ok(b)
                 }));

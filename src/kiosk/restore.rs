@@ -31,7 +31,7 @@
 //!
 //! **Ghost bones.** Each bone of a missing part is a [`GhostBone`] entity, child of the statue,
 //! placed from [`CurrentPose`] with the completed skeleton's size; its rotation relative to its
-//! parent is the completed one (the mirror limb, [`crate::restore::support`]) unless the
+//! parent is the completed one (the mirror limb, [`crate::fakir::support`]) unless the
 //! current pose turned that bone (a preset pose names it), then the pose's. The render plugin
 //! draws them hatched and pale blue ([`super::render`]).
 //!
@@ -78,10 +78,10 @@ use crate::anatomy::{Skeleton, Template};
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
 use crate::fakir::solver::{Cancelled, Pause, Solver};
+use crate::fakir::support::{BoneSupport, complete, support};
 use crate::fakir::{Init, RegistrationOptions, register};
 use crate::geometry::Bone;
 use crate::restore::merge::MergeOptions;
-use crate::restore::support::{BoneSupport, complete, support};
 use crate::restore::transfer::{
     Part, PoseSource, TransferOptions, Transferred, parts_from_support,
 };
@@ -741,8 +741,9 @@ fn load_donor(
                     &mut CancelFlag(cancel),
                 )?;
                 let base = fit.base.map(|b| b.points).unwrap_or_default();
+                let binding = Binding::new_without(&loaded.cloud, &fit.skeleton, &fit.missing)?
+                    .with_base(&base)?;
                 let fit = fit.skeleton;
-                let binding = Binding::new(&loaded.cloud, &fit)?.with_base(&base)?;
                 Ok((fit, binding))
             })?;
             write_cache(&cfg.cache_dir, &loaded.cache_key, &fit, &binding);

@@ -10,23 +10,22 @@
 //!
 //! | stage | module |
 //! |---|---|
-//! | which bones are there: support, missing and partial bones, completion | [`support`] |
+//! | which bones are there: support, missing and partial bones, completion (measured by the registration) | [`crate::fakir::support`] |
 //! | a donor's part re-proportioned and re-posed onto the target | [`transfer`] |
 //! | the overlap merged to a single layer (eq. 5.1) | [`merge`] |
 //! | the whole restoration, with provenance | [`restore`] (this module) |
 //! | one part at a time (the kiosk's part swapping): donor check, assembly with provenance | [`check_donor`], [`Assembly`] |
 
 pub mod merge;
-pub mod support;
 pub mod transfer;
 
 use crate::anatomy::Skeleton;
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
+use crate::fakir::support::{BoneSupport, complete, support};
 use crate::math::Vec3;
 use merge::{MergeOptions, MergeStats, merge};
 use serde::Serialize;
-use support::{BoneSupport, complete, support};
 use transfer::{Part, PoseSource, TransferOptions, parts_from_support, transfer};
 
 /// Where a restored point comes from.

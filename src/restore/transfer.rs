@@ -11,10 +11,10 @@
 //! donor. The part therefore hangs from the target's joint with the target's proportions.
 //! Heightfield skinning is used by default, as in the thesis.
 
-use super::support::BoneSupport;
 use crate::anatomy::{Skeleton, Template};
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
+use crate::fakir::support::BoneSupport;
 use crate::math::Vec3;
 use crate::skinning::{Binding, Method};
 use serde::Serialize;

@@ -171,6 +171,14 @@ impl Binding {
     /// Errors: an empty cloud, non-finite coordinates, a skeleton with non-finite or
     /// non-positive sizes, more than 65,534 bones.
     pub fn new(cloud: &PointCloud, fitted: &Skeleton) -> Result<Binding> {
+        Binding::new_without(cloud, fitted, &[])
+    }
+
+    /// [`Binding::new`] where no point is bound to (or blended with) a bone flagged in `lost`
+    /// (the lost limbs of a broken statue, [`crate::fakir::Fit::missing`]: completed to a
+    /// plausible pose, they may pass through parts that are there). An empty `lost` flags
+    /// none.
+    pub fn new_without(cloud: &PointCloud, fitted: &Skeleton, lost: &[bool]) -> Result<Binding> {
         if cloud.is_empty() {
             return Err(Error::input("cannot bind an empty point cloud"));
         }
@@ -200,6 +208,7 @@ impl Binding {
                     &bones,
                     &tables,
                     t.bones.as_slice(),
+                    lost,
                 )
             })
             .collect();
@@ -416,9 +425,23 @@ fn bind_point(
     bones: &[BoneBind],
     tables: &baseline::Tables,
     defs: &[crate::anatomy::template::BoneDef],
+    lost: &[bool],
 ) -> Rec {
-    // Nearest bone by (fast) signed distance, then the exact projection on it.
-    let (k, _) = crate::geometry::bone::nearest_bone(prepared, p);
+    let is_lost = |b: usize| lost.get(b).copied().unwrap_or(false);
+    // Nearest bone by (fast) signed distance (lost bones left out), then the exact
+    // projection on it.
+    let k = if lost.iter().any(|&l| l) {
+        let mut best = (0, f32::INFINITY);
+        for (b, pb) in prepared.iter().enumerate() {
+            let d = pb.sdf_fast(p);
+            if !is_lost(b) && d < best.1 {
+                best = (b, d);
+            }
+        }
+        best.0
+    } else {
+        crate::geometry::bone::nearest_bone(prepared, p).0
+    };
     let proj = prepared[k].project(p);
     let bb = &bones[k];
     let inv = bb.frame.inverse();
@@ -436,7 +459,7 @@ fn bind_point(
     let mut weight = 0.0;
     let mut best_m: Option<(usize, f32, f32)> = None;
     let mut consider = |m: usize, eps: f32| {
-        if eps <= 0.0 {
+        if eps <= 0.0 || is_lost(m) {
             return;
         }
         let d = prepared[m].sdf_fast(proj.point).max(0.0);

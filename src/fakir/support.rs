@@ -92,7 +92,10 @@ pub fn mirrors(t: &Template) -> Vec<Option<usize>> {
 
 /// Expected length and radii of every bone (see the module docs), and whether the fitted
 /// bone had collapsed.
-fn expected_sizes(fitted: &Skeleton) -> (Vec<(f32, f32, f32)>, Vec<bool>) {
+fn expected_sizes(
+    fitted: &Skeleton,
+    healthy: Option<&[bool]>,
+) -> (Vec<(f32, f32, f32)>, Vec<bool>) {
     let t = &fitted.template;
     let rest = Skeleton::rest(t.clone());
     let mut ratios: Vec<f32> = fitted
@@ -117,7 +120,7 @@ fn expected_sizes(fitted: &Skeleton) -> (Vec<(f32, f32, f32)>, Vec<bool>) {
     let mir = mirrors(t);
     let sizes = (0..t.bones.len())
         .map(|k| match mir[k] {
-            Some(m) if !shrunk[m] => {
+            Some(m) if healthy.map_or(!shrunk[m], |h| h[m]) => {
                 let b = &fitted.bones[m];
                 (b.length, b.r1, b.r2)
             }
@@ -136,8 +139,16 @@ fn reflect(d: Vec3, root: Quat) -> Vec3 {
 /// A copy of `fitted` where every bone flagged in `redo` gets its expected size and the pose of
 /// its healthy mirror (reflected) or its rest pose relative to its parent.
 pub fn complete(fitted: &Skeleton, redo: &[bool]) -> Skeleton {
+    complete_with(fitted, redo, None)
+}
+
+/// [`complete`] where the mirror bones known to be there are `healthy` (the registration
+/// knows which limbs it found lost; a healthy limb 30% shorter than the template's
+/// proportions is not shrunk). `None`: a mirror is healthy when it is neither redone nor
+/// shrunk.
+pub fn complete_with(fitted: &Skeleton, redo: &[bool], healthy: Option<&[bool]>) -> Skeleton {
     let t = &fitted.template;
-    let (sizes, shrunk) = expected_sizes(fitted);
+    let (sizes, shrunk) = expected_sizes(fitted, healthy);
     let mir = mirrors(t);
     let rest = Skeleton::rest(t.clone());
     let mut s = fitted.clone();
@@ -156,7 +167,7 @@ pub fn complete(fitted: &Skeleton, redo: &[bool]) -> Skeleton {
             .map(|p| posed.frames[p])
             .unwrap_or(s.root_rotation);
         match mir[k] {
-            Some(m) if !shrunk[m] && !redo[m] => {
+            Some(m) if healthy.map_or(!shrunk[m] && !redo[m], |h| h[m]) => {
                 let fp = fitted.pose();
                 let want = reflect(fp.frames[m] * Vec3::X, fitted.root_rotation);
                 let world_now = parent_frame * (rest.bones[k].rotation * Vec3::X);
@@ -172,8 +183,6 @@ pub fn complete(fitted: &Skeleton, redo: &[bool]) -> Skeleton {
 
 /// Support of every bone of `fitted` in `cloud`. Errors: an empty cloud.
 pub fn support(cloud: &PointCloud, fitted: &Skeleton) -> Result<Vec<BoneSupport>> {
-    let t = &fitted.template;
-    let n = t.bones.len();
     let pts: Vec<[f32; 3]> = cloud.positions.iter().map(|p| p.to_array()).collect();
     if pts.is_empty() {
         return Err(Error::input("support: the cloud is empty"));
@@ -181,52 +190,87 @@ pub fn support(cloud: &PointCloud, fitted: &Skeleton) -> Result<Vec<BoneSupport>
     let tree = ImmutableKdTree::<f32, 3>::new_from_slice(&pts)
         .map_err(|e| Error::input(format!("support: k-d tree: {e:?}")))?;
     let rho = mean_spacing(&cloud.positions, &tree);
-    let (sizes, shrunk) = expected_sizes(fitted);
-    // Shrunk bones are examined at their expected size, along their fitted direction and
-    // along their completion direction (mirror or rest); the better coverage counts.
-    let mut along_fit = fitted.clone();
-    for (k, sh) in shrunk.iter().enumerate() {
-        if *sh {
-            (
-                along_fit.bones[k].length,
-                along_fit.bones[k].r1,
-                along_fit.bones[k].r2,
-            ) = sizes[k];
-        }
-    }
-    along_fit.enforce_constraints();
-    let along_completion = complete(fitted, &shrunk);
-    let exams: Vec<(
+    let exam = SupportExam::new(&tree, rho, fitted);
+    Ok((0..fitted.template.bones.len())
+        .into_par_iter()
+        .map(|k| exam.bone(k))
+        .collect())
+}
+
+/// The support of a fit, bone by bone ([`SupportExam::bone`]), over points whose k-d tree
+/// is given: the registration examines its own points one bone per work unit.
+pub struct SupportExam<'a> {
+    fitted: &'a Skeleton,
+    tree: &'a ImmutableKdTree<f32, 3>,
+    /// Mean nearest-neighbour spacing of the points.
+    rho: f32,
+    shrunk: Vec<bool>,
+    /// The fit as it is, the fit with shrunk bones at their expected size, the fit with
+    /// shrunk bones completed: each posed and prepared.
+    exams: Vec<(
         crate::anatomy::Posed,
         Vec<crate::geometry::bone::PreparedBone>,
-    )> = [fitted.clone(), along_fit, along_completion]
-        .iter()
-        .map(|s| {
-            let posed = s.pose();
-            let prepared = posed.bones.iter().map(Bone::prepare).collect();
-            (posed, prepared)
-        })
-        .collect();
-    Ok((0..n)
-        .into_par_iter()
-        .map(|k| {
-            // A bone that is not shrunk is examined as fitted (resizing another bone would
-            // move it).
-            let tries: &[usize] = if shrunk[k] { &[1, 2] } else { &[0] };
-            let (coverage, reach) = tries
-                .iter()
-                .map(|&e| coverage_of(k, &exams[e].0, &exams[e].1, &tree, rho))
-                .fold((0.0f32, 0.0f32), |a, b| if b.0 > a.0 { b } else { a });
-            BoneSupport {
-                bone: t.bones[k].name.clone(),
-                coverage,
-                reach,
-                missing: coverage < MISSING,
-                partial: (MISSING..PARTIAL).contains(&coverage),
-                shrunk: shrunk[k],
+    )>,
+}
+
+impl<'a> SupportExam<'a> {
+    /// Prepares the examination of `fitted` against the points of `tree` (non-empty), whose
+    /// mean nearest-neighbour spacing is `rho` ([`mean_spacing`]).
+    pub fn new(
+        tree: &'a ImmutableKdTree<f32, 3>,
+        rho: f32,
+        fitted: &'a Skeleton,
+    ) -> SupportExam<'a> {
+        let (sizes, shrunk) = expected_sizes(fitted, None);
+        // Shrunk bones are examined at their expected size, along their fitted direction and
+        // along their completion direction (mirror or rest); the better coverage counts.
+        let mut along_fit = fitted.clone();
+        for (k, sh) in shrunk.iter().enumerate() {
+            if *sh {
+                (
+                    along_fit.bones[k].length,
+                    along_fit.bones[k].r1,
+                    along_fit.bones[k].r2,
+                ) = sizes[k];
             }
-        })
-        .collect())
+        }
+        along_fit.enforce_constraints();
+        let along_completion = complete(fitted, &shrunk);
+        let exams = [fitted.clone(), along_fit, along_completion]
+            .iter()
+            .map(|s| {
+                let posed = s.pose();
+                let prepared = posed.bones.iter().map(Bone::prepare).collect();
+                (posed, prepared)
+            })
+            .collect();
+        SupportExam {
+            fitted,
+            tree,
+            rho,
+            shrunk,
+            exams,
+        }
+    }
+
+    /// The support of bone `k`.
+    pub fn bone(&self, k: usize) -> BoneSupport {
+        // A bone that is not shrunk is examined as fitted (resizing another bone would
+        // move it).
+        let tries: &[usize] = if self.shrunk[k] { &[1, 2] } else { &[0] };
+        let (coverage, reach) = tries
+            .iter()
+            .map(|&e| coverage_of(k, &self.exams[e].0, &self.exams[e].1, self.tree, self.rho))
+            .fold((0.0f32, 0.0f32), |a, b| if b.0 > a.0 { b } else { a });
+        BoneSupport {
+            bone: self.fitted.template.bones[k].name.clone(),
+            coverage,
+            reach,
+            missing: coverage < MISSING,
+            partial: (MISSING..PARTIAL).contains(&coverage),
+            shrunk: self.shrunk[k],
+        }
+    }
 }
 
 /// Coverage and reach of bone `k` of a posed skeleton (see the module docs).
