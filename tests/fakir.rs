@@ -1131,13 +1131,15 @@ fn lost_limbs_registration() {
     // the scan still has stay within 3% of the height (the 2% is for complete
     // statues). Measured when written (6000 points): seed 21 arm: lost r_upper_arm,
     // r_forearm, r_hand, joint error 0.91%; seed 21 leg: lost l_foot, 2.13%; seed 27 arm:
-    // lost r_upper_arm, r_forearm, r_hand, XX%. Broken statues are harder to register: of
+    // lost r_upper_arm, r_forearm, r_hand, 2.53%. Broken statues are harder to register: of
     // seeds 21 and 23–27 with these two cuts (12 statues), 4 fits were wrong as a whole
     // (joint error 15–28%: left and right exchanged, a lost leg taken for the other one)
     // and 3 more came out 5–7% off with a wrong lost set; the lost set is right whenever the
     // fit is (these three, and seed 26's arm).
     const ARM: &[&str] = &["r_forearm", "r_hand"];
-    let cases: [(u64, &str, f32, &[&str], &[&str]); 3] = [
+    // (seed, bone cut, where, bones that must be lost, bones that may be)
+    type Case<'a> = (u64, &'a str, f32, &'a [&'a str], &'a [&'a str]);
+    let cases: [Case; 3] = [
         (21, "r_upper_arm", 0.3, ARM, &["r_upper_arm"]),
         (21, "l_shin", 0.3, &["l_foot"], &["l_shin"]),
         (27, "r_upper_arm", 0.3, ARM, &["r_upper_arm"]),
@@ -1206,6 +1208,191 @@ fn lost_limbs_registration() {
         for m in must {
             let sup = &fit.support[t.bone_index(m).unwrap()];
             assert!(sup.coverage < 0.4, "{m}: coverage {}", sup.coverage);
+        }
+    }
+}
+
+/// Mean distance of the joints of `fit` to the truth's (fraction of `height`), joints named
+/// in `leave_out` excepted; with `mirrored`, each truth joint is compared with the fit's
+/// joint of the other side (left and right exchanged).
+fn joint_error_without(
+    fit: &Skeleton,
+    truth: &Skeleton,
+    leave_out: &[&str],
+    height: f32,
+    mirrored: bool,
+) -> f32 {
+    let t = &truth.template;
+    let (fj, tj) = (fit.pose().joints, truth.pose().joints);
+    let other = |name: &str| -> usize {
+        let swapped = match (name.strip_prefix("l_"), name.strip_prefix("r_")) {
+            (Some(r), _) if mirrored => format!("r_{r}"),
+            (_, Some(r)) if mirrored => format!("l_{r}"),
+            _ => name.to_string(),
+        };
+        t.joint_index(&swapped).unwrap()
+    };
+    let kept: Vec<usize> = (0..t.joints.len())
+        .filter(|&j| !leave_out.contains(&t.joints[j].name.as_str()))
+        .collect();
+    kept.iter()
+        .map(|&j| (fj[other(&t.joints[j].name)] - tj[j]).length())
+        .sum::<f32>()
+        / kept.len() as f32
+        / height
+}
+
+#[test]
+fn limbs_known_lost_are_left_out_from_the_start() {
+    on_one_thread(known_lost_registration);
+}
+
+fn known_lost_registration() {
+    use pygmalion::fakir::{Registration, RegistrationOptions};
+    // A Venus: both arms broken off near the shoulder (a stump of 0.2 of the upper arm).
+    // Told so (`RegistrationOptions::lost`) and where she faces (`front`), the registration
+    // leaves the arms out from the start: no point goes to them, they come out completed,
+    // and the figure that is there is fitted. Measured when written (6000 points, a
+    // 4000-point level 0) over the joints the scan has (without the elbows, wrists and hand
+    // tips): seed 22 2.32%, seed 23 3.27% (a guard at 4%: the 2% is for complete
+    // statues, and the shoulders lose their stumps' points to the clavicles). Told only the lost arms, seed 22 came out with left
+    // and right exchanged (22.7%): an armless trunk does not tell its heading.
+    let arms = [
+        "l_elbow",
+        "l_wrist",
+        "l_hand_tip",
+        "r_elbow",
+        "r_wrist",
+        "r_hand_tip",
+    ];
+    for seed in [22, 23] {
+        let s = cut_human(seed, 6_000, &[("l_upper_arm", 0.2), ("r_upper_arm", 0.2)]);
+        let t = s.truth.template.clone();
+        let fit = Registration::new(
+            std::sync::Arc::new(s.cloud.clone()),
+            t.clone(),
+            RegistrationOptions {
+                subsample: 4_000,
+                lost: vec!["l_upper_arm".into(), "r_upper_arm".into()],
+                // Where she faces (an armless trunk does not tell).
+                front: Some(s.truth.root_rotation * Vec3::Z),
+                ..Default::default()
+            },
+        )
+        .unwrap()
+        .run_to_convergence()
+        .unwrap();
+        let err = joint_error_without(&fit.skeleton, &s.truth, &arms, 1.7, false);
+        let mirrored = joint_error_without(&fit.skeleton, &s.truth, &arms, 1.7, true);
+        let lost: Vec<&str> = (0..t.bones.len())
+            .filter(|&b| fit.missing[b])
+            .map(|b| t.bones[b].name.as_str())
+            .collect();
+        println!(
+            "seed {seed}: lost {lost:?}, joint error of the joints left {:.2}%",
+            100.0 * err
+        );
+        for name in [
+            "l_upper_arm",
+            "l_forearm",
+            "l_hand",
+            "r_upper_arm",
+            "r_forearm",
+            "r_hand",
+        ] {
+            let b = t.bone_index(name).unwrap();
+            assert!(fit.missing[b], "seed {seed}: {name} not reported lost");
+            assert_eq!(fit.bone_counts[b], 0, "seed {seed}: {name} took points");
+            // Completed to the template's proportions (no healthy mirror): not collapsed.
+            let rest = Skeleton::rest(t.clone()).bones[b].length * fit.skeleton.block_scale;
+            let l = fit.skeleton.bones[b].length;
+            assert!(
+                l > 0.5 * rest && l < 2.0 * rest,
+                "seed {seed}: {name} has length {l}, expected about {rest}"
+            );
+        }
+        assert!(err < mirrored, "seed {seed}: left and right exchanged");
+        assert!(err < 0.04, "seed {seed}: joint error {err}");
+    }
+}
+
+#[test]
+fn a_facing_hint_keeps_the_headings_near_it() {
+    use pygmalion::fakir::init::{FRONT_SPREAD, Init, candidates};
+    let s = small_human(3, 3_000, false);
+    let t = s.truth.template.clone();
+    let pts = &s.cloud.positions;
+    let front = Vec3::new(1.0, 0.3, 1.0).normalize();
+    let level = Vec3::new(1.0, 0.0, 1.0).normalize();
+    // With the up axis: three headings, FRONT_SPREAD apart, centred on the hint made level.
+    let c = candidates(&t, pts, &Init::Up(Vec3::Y), Some(front));
+    assert_eq!(c.len(), 3);
+    for (k, cand) in c.iter().enumerate() {
+        let q = cand.skeleton.root_rotation;
+        assert!((q * Vec3::Y - Vec3::Y).length() < 1e-4, "up kept");
+        let angle = (q * Vec3::Z).angle_between(level);
+        let want = if k == 1 { 0.0 } else { FRONT_SPREAD };
+        assert!((angle - want).abs() < 1e-3, "heading {k}: {angle} rad");
+    }
+    // Without it: only the principal-axis placements facing within 60° of the hint.
+    let all = candidates(&t, pts, &Init::Auto, None);
+    let near = candidates(&t, pts, &Init::Auto, Some(front));
+    assert!(
+        !near.is_empty() && near.len() < all.len(),
+        "{} of {}",
+        near.len(),
+        all.len()
+    );
+    for cand in &near {
+        assert!((cand.skeleton.root_rotation * Vec3::Z).dot(front) >= 0.5);
+    }
+}
+
+#[test]
+fn lost_limbs_are_named_with_what_they_carry_and_collapse_into_their_joint() {
+    use pygmalion::anatomy::Template;
+    use pygmalion::fakir::support::{COLLAPSED, collapse, lost_from_names};
+    let t = std::sync::Arc::new(Template::builtin("human").unwrap());
+    let lost = lost_from_names(&t, &["r_forearm".to_string(), "l_shin".into()]).unwrap();
+    let named: Vec<&str> = (0..t.bones.len())
+        .filter(|&b| lost[b])
+        .map(|b| t.bones[b].name.as_str())
+        .collect();
+    assert_eq!(named.len(), 4, "{named:?}");
+    for n in ["r_forearm", "r_hand", "l_shin", "l_foot"] {
+        assert!(named.contains(&n), "{named:?}");
+    }
+    // Errors name the bone: a misspelling gets the closest names, the trunk is refused.
+    let e = lost_from_names(&t, &["r_forarm".to_string()])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("'r_forarm'") && e.contains("r_forearm"), "{e}");
+    let e = lost_from_names(&t, &["spine_upper".to_string()])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("trunk"), "{e}");
+    // Collapsed: a sliver at the joint it hangs from, inside that joint's sphere.
+    let rest = Skeleton::rest(t.clone());
+    let mut s = rest.clone();
+    collapse(&mut s, &lost);
+    let (posed, before) = (s.pose(), rest.pose());
+    for b in 0..t.bones.len() {
+        if !lost[b] {
+            assert_eq!(s.bones[b], rest.bones[b]);
+            continue;
+        }
+        assert!((s.bones[b].length - COLLAPSED * rest.bones[b].length).abs() < 1e-6);
+        let p = t.bones[b].parent.unwrap();
+        if !lost[p] {
+            // The first lost bone keeps its joint's radius; its far end lies in that sphere.
+            assert_eq!(s.bones[b].r1, rest.bones[b].r1);
+            let joint = before.bones[p].c2;
+            assert!((posed.bones[b].c2 - joint).length() < before.bones[p].r2);
+        } else {
+            assert_eq!(
+                s.bones[b].r1, s.bones[p].r2,
+                "radius shared along the chain"
+            );
         }
     }
 }

@@ -174,7 +174,12 @@ fn edit_distance(a: &str, b: &str) -> usize {
 }
 
 /// "unknown bone 'x' …" with the closest names among `candidates`.
-fn unknown_bone(what: &str, name: &str, template: &Template, candidates: &[usize]) -> String {
+pub(crate) fn unknown_bone(
+    what: &str,
+    name: &str,
+    template: &Template,
+    candidates: &[usize],
+) -> String {
     let mut names: Vec<&str> = candidates
         .iter()
         .map(|&i| template.bones[i].name.as_str())

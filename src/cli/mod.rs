@@ -153,6 +153,15 @@ enum Command {
         /// Register every point: do not look for a base (plinth) to set aside.
         #[arg(long)]
         keep_base: bool,
+        /// Bones the statue is known to have lost, comma-separated (e.g.
+        /// `l_upper_arm,r_forearm`): each is left out with the bones it carries, from the
+        /// start, and completed at the end. Other lost limbs are still looked for.
+        #[arg(long)]
+        missing: Option<String>,
+        /// The direction the figure faces: `x`, `y`, `z`, `-x`, … or `x,y,z`. Only headings
+        /// near it are tried (an armless torso does not tell its heading).
+        #[arg(long, conflicts_with = "start")]
+        front: Option<String>,
     },
     /// Re-poses a registered statue by point-set skinning and writes the re-posed cloud.
     Repose {
@@ -375,17 +384,21 @@ where
             labels,
             drop_non_finite,
             keep_base,
-        } => crate::cli::register::run(
-            &input,
-            &template,
-            anchor.as_deref(),
-            up.as_deref(),
-            start.as_deref(),
-            out.as_deref(),
-            labels.as_deref(),
+            missing,
+            front,
+        } => crate::cli::register::run(&crate::cli::register::Args {
+            input: &input,
+            template: &template,
+            anchor: anchor.as_deref(),
+            up: up.as_deref(),
+            start: start.as_deref(),
+            out: out.as_deref(),
+            labels: labels.as_deref(),
             drop_non_finite,
             keep_base,
-        ),
+            missing: missing.as_deref(),
+            front: front.as_deref(),
+        }),
         Command::Repose {
             input,
             fit,

@@ -132,26 +132,35 @@ impl FitReport {
     }
 }
 
-/// Runs the command (its arguments as the CLI parsed them).
-#[allow(clippy::too_many_arguments)]
-pub fn run(
-    input: &Path,
-    template: &str,
-    anchor: Option<&str>,
-    up: Option<&str>,
-    start: Option<&Path>,
-    out: Option<&Path>,
-    labels: Option<&Path>,
-    drop_non_finite: bool,
-    keep_base: bool,
-) -> Result<()> {
-    let template = Arc::new(Template::resolve(template)?);
-    let cloud = super::read(input, drop_non_finite)?;
-    let up = up.map(parse_axis).transpose()?;
+/// The command's arguments (as the CLI parsed them).
+pub struct Args<'a> {
+    pub input: &'a Path,
+    pub template: &'a str,
+    pub anchor: Option<&'a str>,
+    pub up: Option<&'a str>,
+    pub start: Option<&'a Path>,
+    pub out: Option<&'a Path>,
+    pub labels: Option<&'a Path>,
+    pub drop_non_finite: bool,
+    pub keep_base: bool,
+    /// Bones known lost, comma-separated (`RegistrationOptions::lost`).
+    pub missing: Option<&'a str>,
+    /// The direction the figure faces (`RegistrationOptions::front`), as `parse_axis` reads.
+    pub front: Option<&'a str>,
+}
+
+/// Runs the command.
+pub fn run(a: &Args) -> Result<()> {
+    let template = Arc::new(Template::resolve(a.template)?);
+    let lost = parse_bone_list(a.missing);
+    // A wrong bone name is reported before the cloud is read.
+    crate::fakir::support::lost_from_names(&template, &lost)?;
+    let cloud = super::read(a.input, a.drop_non_finite)?;
+    let up = a.up.map(parse_axis).transpose()?;
     let init = match (
-        anchor.map(|a| parse_vec3(a, "anchor")).transpose()?,
+        a.anchor.map(|x| parse_vec3(x, "anchor")).transpose()?,
         up,
-        start,
+        a.start,
     ) {
         (_, _, Some(path)) => Init::Given(crate::anatomy::Skeleton::load_json(
             path,
@@ -163,14 +172,28 @@ pub fn run(
     };
     let opts = RegistrationOptions {
         init,
-        base: if keep_base {
+        base: if a.keep_base {
             None
         } else {
             RegistrationOptions::default().base
         },
+        lost,
+        front: a.front.map(parse_axis).transpose()?,
         ..Default::default()
     };
-    fit(input, Arc::new(cloud), template, opts, out, labels)
+    fit(a.input, Arc::new(cloud), template, opts, a.out, a.labels)
+}
+
+/// The names of a comma-separated bone list (`None` or empty: none).
+pub fn parse_bone_list(list: Option<&str>) -> Vec<String> {
+    list.map(|l| {
+        l.split(',')
+            .map(str::trim)
+            .filter(|n| !n.is_empty())
+            .map(String::from)
+            .collect()
+    })
+    .unwrap_or_default()
 }
 
 /// Fits `template` to a cloud already read from `input` (named in messages), with the

@@ -12,6 +12,12 @@
 //!    the cloud's, up to the sign of each axis and the order of the two minor axes (8
 //!    candidates); with an up hint, the template's up is sent to the hint and the facing
 //!    direction takes 8 headings about it.
+//!    **A facing hint** (our addition: a curator knows where a statue faces; `front` in
+//!    [`candidates`]) keeps only the headings near it: with an up hint, three headings
+//!    [`FRONT_SPREAD`] apart centred on the hint; without one, the principal-axis candidates
+//!    whose facing lies within 60° of it (all of them when none does). On an armless figure
+//!    (the *Venus de Milo*) the sphere-mesh trunk is round and nothing else tells its heading:
+//!    the automatic choice turned it by 90°.
 //! 4. **Placement**: the root goes where the template's root sits relative to its centroid,
 //!    mapped by the candidate and the scale, or at the given anchor.
 //! 5. **Choice**: a short registration (one whole-skeleton iteration on a small subsample)
@@ -82,7 +88,12 @@ fn extent_along(points: &[Vec3], c: Vec3, axis: Vec3) -> f32 {
 }
 
 /// The candidate placements for `points` (see the module docs).
-pub fn candidates(t: &Arc<Template>, points: &[Vec3], init: &Init) -> Vec<Candidate> {
+pub fn candidates(
+    t: &Arc<Template>,
+    points: &[Vec3],
+    init: &Init,
+    front: Option<Vec3>,
+) -> Vec<Candidate> {
     let samples = template_samples(t, 4000);
     let (Some(tp), Some(cp)) = (pca(&samples), pca(points)) else {
         return Vec::new();
@@ -105,15 +116,43 @@ pub fn candidates(t: &Arc<Template>, points: &[Vec3], init: &Init) -> Vec<Candid
             scale = extent_along(points, cp.centroid, up)
                 / extent_along(&samples, tp.centroid, Vec3::Y).max(1e-9);
             let base = crate::geometry::frames::rotation_arc(Vec3::Y, up);
-            for k in 0..8 {
-                let heading = Quat::from_axis_angle(up, k as f32 * std::f32::consts::TAU / 8.0);
-                rotations.push((heading * base).normalize());
+            // The facing hint, level with the up axis.
+            let facing = front
+                .map(|f| f - f.dot(up) * up)
+                .filter(|f| f.length() > 1e-3 * front.map_or(1.0, |g| g.length()));
+            match facing {
+                Some(f) => {
+                    let (now, f) = (base * Vec3::Z, f.normalize());
+                    let angle = now.cross(f).dot(up).atan2(now.dot(f));
+                    for k in [-1.0f32, 0.0, 1.0] {
+                        let heading = Quat::from_axis_angle(up, angle + k * FRONT_SPREAD);
+                        rotations.push((heading * base).normalize());
+                    }
+                }
+                None => {
+                    for k in 0..8 {
+                        let heading =
+                            Quat::from_axis_angle(up, k as f32 * std::f32::consts::TAU / 8.0);
+                        rotations.push((heading * base).normalize());
+                    }
+                }
             }
         }
         _ => {
             scale = extent_along(points, cp.centroid, cp.axes[0])
                 / extent_along(&samples, tp.centroid, tp.axes[0]).max(1e-9);
             rotations = axis_alignments(&tp, &cp);
+            if let Some(f) = front.filter(|f| f.length() > 1e-9) {
+                let f = f.normalize();
+                let near: Vec<Quat> = rotations
+                    .iter()
+                    .copied()
+                    .filter(|q| (*q * Vec3::Z).dot(f) >= 0.5)
+                    .collect();
+                if !near.is_empty() {
+                    rotations = near;
+                }
+            }
         }
     }
     rotations
@@ -130,6 +169,9 @@ pub fn candidates(t: &Arc<Template>, points: &[Vec3], init: &Init) -> Vec<Candid
         })
         .collect()
 }
+
+/// Angle between the headings tried around a facing hint ([`candidates`]): 20°.
+pub const FRONT_SPREAD: f32 = 20.0 * std::f32::consts::PI / 180.0;
 
 /// `c` placed again at `f` times its scale, with the same orientation: its root moves away
 /// from (or towards) `pivot` by `f` — the cloud's centroid, which the automatic placement

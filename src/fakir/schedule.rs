@@ -202,11 +202,15 @@ pub fn register_skeleton(
                 } else {
                     trusted_except(s, &group)
                 };
+                // A lost limb is seeded up to where it broke.
                 let chains: Vec<&[usize]> = group
                     .iter()
-                    .map(|&c| t.chains[c].bones.as_slice())
+                    .map(|&c| s.present_prefix(&t.chains[c].bones))
+                    .filter(|c| !c.is_empty())
                     .collect();
-                s.seed_chains(&chains, &trusted)?;
+                if !chains.is_empty() {
+                    s.seed_chains(&chains, &trusted)?;
+                }
             }
         }
         before = s.mean_distance();

@@ -211,6 +211,15 @@ impl<'p> Solver<'p> {
         Ok(())
     }
 
+    /// [`Solver::set_absent`] for a solver whose distances are not computed yet (the first
+    /// refresh labels every point): no work unit.
+    pub fn start_absent(&mut self, absent: &[bool]) {
+        self.absent = absent.to_vec();
+        for (b, &a) in absent.iter().enumerate() {
+            self.assignment.enabled[b] = !a;
+        }
+    }
+
     /// What the points of bone `b`'s subtree would lose if the subtree were gone: the mean, over at most
     /// [`EXCESS_POINTS`] of its points (a fixed stride), of how much farther each lies from
     /// the nearest other bone (normal-constrained distance, lost bones excluded) than from
@@ -294,9 +303,13 @@ impl<'p> Solver<'p> {
         self.pause = Some(pause);
     }
 
-    /// Replaces the assignment (e.g. moving to all points) and forgets cached distances.
+    /// Replaces the assignment (e.g. moving to all points) and forgets cached distances; absent
+    /// bones stay absent.
     pub fn set_assignment(&mut self, a: Assignment) {
         self.assignment = a;
+        for (b, &lost) in self.absent.iter().enumerate() {
+            self.assignment.enabled[b] = !lost;
+        }
         let n = self.world.template.bones.len();
         self.assigned_bones =
             vec![Bone::new(Vec3::splat(f32::NAN), 0.0, Vec3::splat(f32::NAN), 0.0); n];

@@ -98,12 +98,19 @@ fn expected_sizes(
 ) -> (Vec<(f32, f32, f32)>, Vec<bool>) {
     let t = &fitted.template;
     let rest = Skeleton::rest(t.clone());
+    // The statue's scale from the bones known to be there (all of them when none is known
+    // lost: a collapsed or lost bone says nothing of the statue's proportions).
     let mut ratios: Vec<f32> = fitted
         .bones
         .iter()
         .zip(&rest.bones)
-        .map(|(f, r)| f.length / r.length.max(1e-12))
+        .enumerate()
+        .filter(|(k, _)| healthy.is_none_or(|h| h[*k]))
+        .map(|(_, (f, r))| f.length / r.length.max(1e-12))
         .collect();
+    if ratios.is_empty() {
+        ratios.push(fitted.block_scale);
+    }
     ratios.sort_by(f32::total_cmp);
     let scale = ratios[ratios.len() / 2];
     let templ: Vec<(f32, f32, f32)> = rest
@@ -179,6 +186,72 @@ pub fn complete_with(fitted: &Skeleton, redo: &[bool], healthy: Option<&[bool]>)
     }
     s.enforce_constraints();
     s
+}
+
+/// The bones named in `names` and every bone they carry (a limb the statue is known to have
+/// lost, [`super::RegistrationOptions::lost`]), flagged by index. Errors name the bone: an
+/// unknown name (with the closest names), or a bone that is not a limb bone (the root block
+/// and the trunk carry the rest of the figure and cannot be left out).
+pub fn lost_from_names(t: &Template, names: &[String]) -> Result<Vec<bool>> {
+    let trunk = super::solver::trunk_bones(t);
+    let mut lost = vec![false; t.bones.len()];
+    for name in names {
+        let name = name.trim();
+        let Some(b) = t.bone_index(name) else {
+            let limbs: Vec<usize> = (0..t.bones.len()).filter(|&b| !trunk[b]).collect();
+            return Err(Error::input(crate::anatomy::pose::unknown_bone(
+                "missing bones",
+                name,
+                t,
+                &limbs,
+            )));
+        };
+        if trunk[b] {
+            return Err(Error::input(format!(
+                "missing bones: '{name}' is part of the trunk of template '{}'; only limb \
+                 bones can be missing",
+                t.name
+            )));
+        }
+        for x in t.subtree(b) {
+            lost[x] = true;
+        }
+    }
+    Ok(lost)
+}
+
+/// Length of a collapsed bone, as a fraction of its length ([`collapse`]).
+pub const COLLAPSED: f32 = 0.02;
+
+/// Collapses the bones flagged in `lost` into the joint they hang from: a length of
+/// [`COLLAPSED`] times theirs and a far radius of half their smaller one (the near radius is
+/// the joint's, shared with the parent). A registration that knows a limb is lost starts
+/// from this, so the lost bones neither stick out into empty space (the occupancy term) nor
+/// hide other bones' surface; [`complete_with`] gives them their expected size at the end.
+pub fn collapse(s: &mut Skeleton, lost: &[bool]) {
+    let t = s.template.clone();
+    for (k, def) in t.bones.iter().enumerate() {
+        if !lost.get(k).copied().unwrap_or(false) {
+            continue;
+        }
+        let parent_lost = def.parent.is_some_and(|p| lost[p]);
+        let b = &mut s.bones[k];
+        b.length *= COLLAPSED;
+        let small = 0.5 * b.r1.min(b.r2);
+        if parent_lost {
+            b.r1 = small;
+        }
+        b.r2 = small;
+    }
+    // A lost bone's children are lost too: their near radius follows the collapsed joint.
+    for (k, def) in t.bones.iter().enumerate() {
+        if lost.get(k).copied().unwrap_or(false)
+            && let Some(p) = def.parent
+            && lost[p]
+        {
+            s.bones[k].r1 = s.bones[p].r2;
+        }
+    }
 }
 
 /// Support of every bone of `fitted` in `cloud`. Errors: an empty cloud.
