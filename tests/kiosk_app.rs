@@ -27,6 +27,7 @@ fn config(root: &Path, file: &str) -> KioskConfig {
             title: "test".into(),
             credit: String::new(),
             up: Some("y".into()),
+            ..Default::default()
         }],
         ..Default::default()
     };

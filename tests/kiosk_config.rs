@@ -123,3 +123,43 @@ fn statue_paths_must_stay_inside_the_root() {
     assert!(!stays_inside(Path::new("/a.ply")));
     assert!(!stays_inside(Path::new("")));
 }
+
+#[test]
+fn a_statues_facing_and_lost_limbs_are_read_and_checked() {
+    let file = Path::new("museum/kiosk.toml");
+    let text = r#"
+[[statues]]
+file = "statues/venus.ply"
+front = "-z"
+missing = ["l_upper_arm", "r_forearm"]
+
+[[statues]]
+file = "statues/bust.ply"
+front = "sideways"
+missing = ["l_uper_arm", "spine_upper", 3, "r_thigh"]
+
+[[statues]]
+file = "statues/other.ply"
+missing = "l_upper_arm"
+"#;
+    let c = KioskConfig::from_toml(text, file);
+    let all = c.problems.join("\n");
+    assert_eq!(c.statues.len(), 3);
+    assert_eq!(c.statues[0].front.as_deref(), Some("-z"));
+    assert_eq!(c.statues[0].missing, ["l_upper_arm", "r_forearm"]);
+    // A bad axis, a misspelt bone (with the closest name), a trunk bone and a number are
+    // reported and left out; the good name stays.
+    assert_eq!(c.statues[1].front, None);
+    assert_eq!(c.statues[1].missing, ["r_thigh"]);
+    assert!(all.contains("statues[1].front"), "{all}");
+    assert!(
+        all.contains("unknown bone 'l_uper_arm'") && all.contains("l_upper_arm"),
+        "{all}"
+    );
+    assert!(all.contains("'spine_upper' is part of the trunk"), "{all}");
+    assert!(all.contains("expected a bone name, not 3"), "{all}");
+    // Not a list: ignored.
+    assert!(c.statues[2].missing.is_empty());
+    assert!(all.contains("statues[2].missing"), "{all}");
+    assert_eq!(c.problems.len(), 5, "{all}");
+}

@@ -49,7 +49,8 @@ fn synth(seed: u64, cuts: &[&str]) -> SynthStatue {
 }
 
 /// Writes the statues (file name, statue, cached or not) under `dir` and returns the kiosk's
-/// configuration; cached statues get their ground truth as fit.
+/// configuration; cached statues get their ground truth as fit, and their cut limbs as the
+/// lost bones the registration would have reported.
 fn setup(dir: &Path, statues: &[(&str, &SynthStatue, bool)]) -> KioskConfig {
     let mut c = KioskConfig {
         assets_root: dir.to_path_buf(),
@@ -62,6 +63,7 @@ fn setup(dir: &Path, statues: &[(&str, &SynthStatue, bool)]) -> KioskConfig {
                 title: name.to_string(),
                 credit: String::new(),
                 up: None,
+                ..Default::default()
             })
             .collect(),
         ..Default::default()
@@ -80,7 +82,14 @@ fn setup(dir: &Path, statues: &[(&str, &SynthStatue, bool)]) -> KioskConfig {
         .unwrap();
         if *cached {
             let l = load(&c.assets_root, &c.cache_dir, entry, c.budget.point_budget).unwrap();
-            let b = Binding::new(&l.cloud, &s.truth).unwrap();
+            // The registration's verdict on its lost limbs, as the generator knows them: the
+            // bones that lost every point to the cuts.
+            let mut counts = vec![0usize; s.truth.bones.len()];
+            for &b in &s.labels {
+                counts[b as usize] += 1;
+            }
+            let lost: Vec<bool> = counts.iter().map(|&c| c == 0).collect();
+            let b = Binding::new_without(&l.cloud, &s.truth, &lost).unwrap();
             write_cache(&c.cache_dir, &l.cache_key, &s.truth, &b);
         }
     }

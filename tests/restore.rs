@@ -63,6 +63,7 @@ fn a_cut_forearm_is_restored_from_a_different_donor_in_a_single_layer() {
             name: "donor".into(),
             cloud: &donor.cloud,
             fit: &donor.truth,
+            missing: None,
         }],
         &RestoreOptions {
             pose: PoseSource::Keep,
@@ -254,4 +255,64 @@ fn restore_command_writes_provenance_and_refuses_impossible_requests() {
     .to_string();
     assert!(err.contains("sideways"), "{err}");
     assert!(!dir.join("x.ply").exists());
+}
+
+#[test]
+fn the_registrations_verdict_decides_what_is_missing() {
+    use pygmalion::restore::missing_bones;
+    let target = statue(5, &["bone:l_forearm", "bone:l_hand"]);
+    let donor = statue(9, &[]);
+    let t = target.truth.template.clone();
+    let n = t.bones.len();
+    let names = |m: &[bool]| -> Vec<String> {
+        (0..n)
+            .filter(|&b| m[b])
+            .map(|b| t.bones[b].name.clone())
+            .collect()
+    };
+    // Without a verdict the support judges; with one, the verdict stands (one rule for
+    // `restore`, the kiosk's ghost limbs and FIT.json).
+    let judged = missing_bones(&target.cloud, &target.truth, None).unwrap();
+    assert_eq!(names(&judged), ["l_forearm", "l_hand"]);
+    let mut told = vec![false; n];
+    told[t.bone_index("r_foot").unwrap()] = true;
+    let kept = missing_bones(&target.cloud, &target.truth, Some(&told)).unwrap();
+    assert_eq!(names(&kept), ["r_foot"]);
+    assert!(missing_bones(&target.cloud, &target.truth, Some(&told[..3])).is_err());
+    let donors = [Donor {
+        name: "donor".into(),
+        cloud: &donor.cloud,
+        fit: &donor.truth,
+        missing: None,
+    }];
+    // A registration that found nothing lost: nothing to restore, and it says how to ask.
+    let e = restore(
+        &target.cloud,
+        &target.truth,
+        &donors,
+        &RestoreOptions {
+            target_missing: Some(vec![false; n]),
+            ..Default::default()
+        },
+    )
+    .err()
+    .expect("nothing is missing")
+    .to_string();
+    assert!(e.contains("--parts"), "{e}");
+    // A donor whose registration lost that part cannot lend it.
+    let mut donor_lost = vec![false; n];
+    donor_lost[t.bone_index("l_hand").unwrap()] = true;
+    let e = restore(
+        &target.cloud,
+        &target.truth,
+        &[Donor {
+            missing: Some(&donor_lost),
+            ..donors[0].clone()
+        }],
+        &RestoreOptions::default(),
+    )
+    .err()
+    .expect("the donor lacks the hand")
+    .to_string();
+    assert!(e.contains("lacks l_hand"), "{e}");
 }

@@ -532,4 +532,19 @@ fn lost_bones_bind_no_point() {
         let d = max_dist(&out.positions, &cloud.positions);
         assert!(d <= 1e-5, "{m}: a point moved by {d} (height 1)");
     }
+    // The binding remembers what it left out (the kiosk's ghost limbs), through a save and
+    // load too; a binding of every bone has none.
+    assert_eq!(without.lost(), lost.as_slice());
+    assert!(all.lost().is_empty());
+    let dir = crate::common::scratch("binding_lost");
+    let path = dir.join("statue.binding");
+    without.save(&path).unwrap();
+    let back = Binding::load(&path, t.clone()).unwrap();
+    assert_eq!(back.lost(), lost.as_slice());
+    assert_eq!(back.points().bone, without.points().bone);
+    all.save(&path).unwrap();
+    assert!(Binding::load(&path, t.clone()).unwrap().lost().is_empty());
+    // Flags that do not match the template, or that leave nothing, are refused.
+    assert!(Binding::new_without(&cloud, &skel, &[true, false]).is_err());
+    assert!(Binding::new_without(&cloud, &skel, &vec![true; t.bones.len()]).is_err());
 }

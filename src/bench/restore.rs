@@ -46,6 +46,7 @@ fn limb_100k(runs: usize) -> Result<BenchResult> {
                 name: "donor".into(),
                 cloud: &donor.cloud,
                 fit: &donor.truth,
+                missing: None,
             }],
             &RestoreOptions::default(),
         )

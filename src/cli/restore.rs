@@ -35,15 +35,20 @@ fn read(path: &Path) -> Result<PointCloud> {
     Ok(super::read_with_normals(path, false)?.0)
 }
 
+/// A statue's fit and its missing bones (see [`crate::restore::missing_bones`]): read from
+/// `fit` (a `FIT.json` of `register --out`, whose `missing` list is the registration's
+/// verdict; a skeleton file without one leaves it unknown), or registered now.
 fn fit_or_load(
     cloud: &PointCloud,
     path: &Path,
     fit: Option<&Path>,
     template: &Arc<Template>,
     up: Option<crate::math::Vec3>,
-) -> Result<Skeleton> {
+) -> Result<(Skeleton, Option<Vec<bool>>)> {
     if let Some(f) = fit {
-        return Skeleton::load_json(f, Some(template.clone()));
+        let skeleton = Skeleton::load_json(f, Some(template.clone()))?;
+        let missing = missing_of_fit_file(f, &skeleton.template)?;
+        return Ok((skeleton, missing));
     }
     let start = Instant::now();
     let opts = RegistrationOptions {
@@ -63,7 +68,37 @@ fn fit_or_load(
         start.elapsed().as_secs_f64(),
         fit.mean_distance
     );
-    Ok(fit.skeleton)
+    Ok((fit.skeleton, Some(fit.missing)))
+}
+
+/// The `missing` list of a `FIT.json` as flags over `template`'s bones (`None` when the file
+/// has none). Errors name the file: unreadable JSON, a bone the template lacks.
+fn missing_of_fit_file(path: &Path, template: &Template) -> Result<Option<Vec<bool>>> {
+    #[derive(serde::Deserialize)]
+    struct Missing {
+        missing: Option<Vec<String>>,
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+        path: path.to_path_buf(),
+        source: e,
+    })?;
+    let m: Missing = serde_json::from_str(&text)
+        .map_err(|e| Error::input(format!("{}: {e}", path.display())))?;
+    let Some(names) = m.missing else {
+        return Ok(None);
+    };
+    let mut flags = vec![false; template.bones.len()];
+    for n in &names {
+        let k = template.bone_index(n).ok_or_else(|| {
+            Error::input(format!(
+                "{}: missing bone '{n}' is not in template '{}'",
+                path.display(),
+                template.name
+            ))
+        })?;
+        flags[k] = true;
+    }
+    Ok(Some(flags))
 }
 
 /// Runs the command.
@@ -95,12 +130,13 @@ pub fn run(a: &Args) -> Result<()> {
     let template = Arc::new(Template::resolve(a.template)?);
     let up = a.up.map(super::register::parse_axis).transpose()?;
     let target = read(a.target)?;
-    let target_fit = fit_or_load(&target, a.target, a.fit, &template, up)?;
+    let (target_fit, target_missing) = fit_or_load(&target, a.target, a.fit, &template, up)?;
     let mut donor_clouds = Vec::new();
     let mut donor_fits = Vec::new();
+    let mut donor_missing = Vec::new();
     for (i, d) in a.donors.iter().enumerate() {
         let c = read(d)?;
-        let f = fit_or_load(
+        let (f, m) = fit_or_load(
             &c,
             d,
             a.donor_fits.get(i).map(|p| p.as_path()),
@@ -109,16 +145,19 @@ pub fn run(a: &Args) -> Result<()> {
         )?;
         donor_clouds.push(c);
         donor_fits.push(f);
+        donor_missing.push(m);
     }
     let donors: Vec<Donor> = a
         .donors
         .iter()
         .zip(&donor_clouds)
         .zip(&donor_fits)
-        .map(|((p, c), f)| Donor {
+        .zip(&donor_missing)
+        .map(|(((p, c), f), m)| Donor {
             name: p.display().to_string(),
             cloud: c,
             fit: f,
+            missing: m.as_deref(),
         })
         .collect();
     let start = Instant::now();
@@ -128,6 +167,7 @@ pub fn run(a: &Args) -> Result<()> {
         &donors,
         &RestoreOptions {
             parts,
+            target_missing,
             pose,
             ..Default::default()
         },

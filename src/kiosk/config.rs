@@ -11,7 +11,7 @@ use crate::skinning::Method;
 use std::path::{Component, Path, PathBuf};
 
 /// One statue of the carousel.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct StatueEntry {
     /// Path relative to the assets root.
     pub file: PathBuf,
@@ -23,6 +23,13 @@ pub struct StatueEntry {
     pub credit: String,
     /// The statue's up axis (`x`, `y`, `z`, `-y`, …) when known; automatic otherwise.
     pub up: Option<String>,
+    /// The direction the figure faces (same form as `up`) when known; automatic otherwise
+    /// ([`crate::fakir::RegistrationOptions::front`]).
+    pub front: Option<String>,
+    /// Bones the statue is known to have lost (a broken statue's limbs, each with the bones
+    /// it carries: [`crate::fakir::RegistrationOptions::lost`]); registration looks for other
+    /// lost limbs too. They show as ghost limbs to borrow.
+    pub missing: Vec<String>,
 }
 
 /// Idle behaviour.
@@ -119,29 +126,41 @@ impl Default for KioskConfig {
             title: title.into(),
             credit: credit.into(),
             up: up.map(String::from),
+            front: None,
+            missing: Vec::new(),
         };
         KioskConfig {
             assets_root: PathBuf::from("assets"),
             cache_dir: PathBuf::from("target/kiosk-cache"),
             statues: vec![
-                statue(
-                    "statues/statue_dancing_girl_thorvaldsen.ply",
-                    "Dancing Girl",
-                    "Bertel Thorvaldsen, 1817–22 · scan Geoffrey Marchal, CC BY 4.0",
-                    None,
-                ),
-                statue(
-                    "statues/statue_dancing_faun_pompeii.ply",
-                    "Dancing Faun",
-                    "Pompeii, 2nd c. BC · scan Cosmo Wenman, CC BY 3.0",
-                    Some("y"),
-                ),
-                statue(
-                    "statues/statue_venus_de_milo_cast_incomplete.ply",
-                    "Venus de Milo",
-                    "plaster cast · scan Cosmo Wenman, CC BY 3.0",
-                    Some("y"),
-                ),
+                StatueEntry {
+                    front: Some("z".into()),
+                    ..statue(
+                        "statues/statue_dancing_girl_thorvaldsen.ply",
+                        "Dancing Girl",
+                        "Bertel Thorvaldsen, 1817–22 · scan Geoffrey Marchal, CC BY 4.0",
+                        None,
+                    )
+                },
+                StatueEntry {
+                    front: Some("z".into()),
+                    ..statue(
+                        "statues/statue_dancing_faun_pompeii.ply",
+                        "Dancing Faun",
+                        "Pompeii, 2nd c. BC · scan Cosmo Wenman, CC BY 3.0",
+                        Some("y"),
+                    )
+                },
+                StatueEntry {
+                    front: Some("z".into()),
+                    missing: vec!["l_upper_arm".into(), "r_upper_arm".into()],
+                    ..statue(
+                        "statues/statue_venus_de_milo_cast_incomplete.ply",
+                        "Venus de Milo",
+                        "plaster cast · scan Cosmo Wenman, CC BY 3.0",
+                        Some("y"),
+                    )
+                },
             ],
             idle: IdleConfig {
                 attract_after_s: 60.0,
@@ -202,6 +221,38 @@ impl Default for KioskConfig {
 }
 
 /// Reads values out of one TOML table, recording problems.
+/// A statue's `missing` list: text entries naming limb bones of its template (see
+/// [`crate::fakir::support::lost_from_names`]); anything else is reported and left out.
+fn missing_bones(s: &mut Section, template: &str) -> Vec<String> {
+    let Some(v) = s.get("missing") else {
+        return Vec::new();
+    };
+    let Some(list) = v.as_array() else {
+        s.report("missing", "expected a list of bone names, ignored".into());
+        return Vec::new();
+    };
+    // The names are checked against the template when it can be read here (a template that
+    // cannot is reported when the statue loads).
+    let t = crate::anatomy::Template::resolve(template).ok();
+    let mut out = Vec::new();
+    for item in list {
+        match item.as_str() {
+            Some(name) => match &t {
+                Some(t) => match crate::fakir::support::lost_from_names(t, &[name.to_string()]) {
+                    Ok(_) => out.push(name.to_string()),
+                    Err(e) => s.report("missing", format!("{e}; left out")),
+                },
+                None => out.push(name.to_string()),
+            },
+            None => s.report(
+                "missing",
+                format!("expected a bone name, not {item}; left out"),
+            ),
+        }
+    }
+    out
+}
+
 struct Section<'a> {
     table: Option<&'a toml::Table>,
     name: &'a str,
@@ -388,14 +439,21 @@ impl KioskConfig {
                         let template = s.string("template", "human");
                         let title = s.string("title", "");
                         let credit = s.string("credit", "");
-                        let up = match s.get("up") {
+                        let mut axis = |key: &'static str| match s.get(key) {
                             None => None,
-                            Some(toml::Value::String(u)) => Some(u.clone()),
+                            Some(toml::Value::String(u))
+                                if crate::cli::register::parse_axis(u).is_ok() =>
+                            {
+                                Some(u.clone())
+                            }
                             Some(_) => {
-                                s.report("up", "expected text like \"y\", ignored".into());
+                                s.report(key, "expected text like \"y\" or \"-z\", ignored".into());
                                 None
                             }
                         };
+                        let up = axis("up");
+                        let front = axis("front");
+                        let missing = missing_bones(&mut s, &template);
                         s.finish();
                         let rel = PathBuf::from(&file);
                         if file.is_empty() {
@@ -419,6 +477,8 @@ impl KioskConfig {
                                 title,
                                 credit,
                                 up,
+                                front,
+                                missing,
                             });
                         }
                     }

@@ -12,7 +12,7 @@ use super::{
     CurrentPose, FittedSkeleton, KioskSet, Settings, StatueBinding, StatueCloud, StatueState,
 };
 use crate::error::Result;
-use crate::fakir::{Init, Registration, RegistrationOptions};
+use crate::fakir::Registration;
 use crate::skinning::Binding;
 use bevy::prelude::*;
 use std::sync::{Arc, Mutex};
@@ -71,11 +71,7 @@ fn start_fitting(
         if !matches!(*state, StatueState::Fitting { .. }) {
             continue;
         }
-        let opts = RegistrationOptions {
-            init: t.up.map(Init::Up).unwrap_or_default(),
-            ..Default::default()
-        };
-        match Registration::new(cloud.0.clone(), t.template.clone(), opts) {
+        match Registration::new(cloud.0.clone(), t.template.clone(), t.fit_options.clone()) {
             Ok(reg) => {
                 commands.entity(e).insert(Fitter(Mutex::new(reg)));
             }

@@ -77,14 +77,12 @@ use crate::anatomy::pose::ease;
 use crate::anatomy::{Skeleton, Template};
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
+use crate::fakir::register;
 use crate::fakir::solver::{Cancelled, Pause, Solver};
-use crate::fakir::support::{BoneSupport, complete, support};
-use crate::fakir::{Init, RegistrationOptions, register};
+use crate::fakir::support::{BoneSupport, complete_with, support};
 use crate::geometry::Bone;
 use crate::restore::merge::MergeOptions;
-use crate::restore::transfer::{
-    Part, PoseSource, TransferOptions, Transferred, parts_from_support,
-};
+use crate::restore::transfer::{Part, PoseSource, TransferOptions, Transferred, parts_of};
 use crate::restore::{Assembly, FROM_TARGET, check_donor, nearest_bones, transfer::transfer};
 use crate::skinning::{Binding, Scratch};
 use bevy::prelude::*;
@@ -309,7 +307,9 @@ pub struct DonorData {
     pub cloud: Arc<PointCloud>,
     pub fit: Skeleton,
     pub binding: Arc<Binding>,
-    pub support: Vec<BoneSupport>,
+    /// Its missing bones (its registration's verdict, kept by its binding): it cannot lend
+    /// them.
+    pub missing: Vec<bool>,
 }
 
 /// Where a donor is.
@@ -688,11 +688,16 @@ struct Analysis {
     bone: Vec<u32>,
 }
 
-fn analyse_statue(cloud: &PointCloud, fit: &Skeleton) -> Result<Analysis> {
+/// The statue's missing parts are the bones its registration found or was told lost (its
+/// binding leaves them out: [`Binding::lost`]), as for `restore` and `FIT.json`
+/// ([`crate::restore::missing_bones`]); the support of every bone is measured too, for the
+/// operator.
+fn analyse_statue(cloud: &PointCloud, fit: &Skeleton, lost: &[bool]) -> Result<Analysis> {
     let sup = support(cloud, fit)?;
-    let parts = parts_from_support(&fit.template, &sup);
-    let redo: Vec<bool> = sup.iter().map(|s| s.missing).collect();
-    let completed = complete(fit, &redo);
+    let missing = lost_flags(fit, lost);
+    let parts = parts_of(&fit.template, &missing);
+    let healthy: Vec<bool> = missing.iter().map(|m| !m).collect();
+    let completed = complete_with(fit, &missing, Some(&healthy));
     let bone = if parts.is_empty() {
         vec![0; cloud.len()]
     } else {
@@ -704,6 +709,16 @@ fn analyse_statue(cloud: &PointCloud, fit: &Skeleton) -> Result<Analysis> {
         completed,
         bone,
     })
+}
+
+/// A binding's lost bones as one flag per bone of `fit`'s template (none when it has none).
+fn lost_flags(fit: &Skeleton, lost: &[bool]) -> Vec<bool> {
+    let n = fit.template.bones.len();
+    if lost.len() == n {
+        lost.to_vec()
+    } else {
+        vec![false; n]
+    }
 }
 
 fn load_donor(
@@ -729,10 +744,7 @@ fn load_donor(
         Some(c) => c,
         None if fit_donors => {
             stage.store(STAGE_FITTING, Ordering::Relaxed);
-            let opts = RegistrationOptions {
-                init: loaded.up.map(Init::Up).unwrap_or_default(),
-                ..Default::default()
-            };
+            let opts = loaded.fit_options.clone();
             let (fit, binding) = within(&pools().fits, || -> Result<_> {
                 let fit = register(
                     &loaded.cloud,
@@ -756,12 +768,12 @@ fn load_donor(
             )));
         }
     };
-    let support = within(&pools().jobs, || support(&loaded.cloud, &fit))?;
+    let missing = lost_flags(&fit, binding.lost());
     Ok(DonorData {
         cloud: loaded.cloud,
         fit,
         binding: Arc::new(binding),
-        support,
+        missing,
     })
 }
 
@@ -774,7 +786,7 @@ fn prepare_part(
     opts: &TransferOptions,
     thumbnail: Option<(u32, u32, [u8; 3])>,
 ) -> Result<Prepared> {
-    check_donor(&completed.template, donor_name, &donor.support, part)?;
+    check_donor(&completed.template, donor_name, &donor.missing, part)?;
     let tr = transfer(completed, &donor.cloud, &donor.binding, part, opts)?;
     let root = part.bones[0];
     let jt = completed.pose().bones[root].c1;
@@ -1235,15 +1247,16 @@ fn analyse(
         &Pending<Result<Analysis>>,
     )>,
 ) {
-    for (e, state, cloud, fit, _) in &start {
+    for (e, state, cloud, fit, binding) in &start {
         if !matches!(state, StatueState::Ready) {
             continue;
         }
         let cloud = cloud.0.clone();
         let fit = fit.0.clone();
-        commands
-            .entity(e)
-            .insert(background(move || analyse_statue(&cloud, &fit)));
+        let binding = binding.0.clone();
+        commands.entity(e).insert(background(move || {
+            analyse_statue(&cloud, &fit, binding.lost())
+        }));
     }
     for (e, statue, cloud, fit, binding, pending) in &done {
         let Some(result) = pending.take() else {

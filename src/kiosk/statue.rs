@@ -23,13 +23,14 @@ use crate::cloud::PointCloud;
 use crate::cloud::normals::{NormalOptions, ensure_normals};
 use crate::cloud::ply::{ReadOptions, read_ply_with};
 use crate::error::{Error, Result};
+use crate::fakir::{Init, RegistrationOptions};
 use crate::skinning::{Binding, Scratch};
 use bevy::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 /// Bump when the cached formats or the fitting change meaning.
-pub const CACHE_VERSION: u32 = 4;
+pub const CACHE_VERSION: u32 = 5;
 
 /// The result of a background job, polled each frame.
 #[derive(Component)]
@@ -58,7 +59,8 @@ impl<T: Send + 'static> Pending<T> {
 pub struct Loaded {
     pub cloud: Arc<PointCloud>,
     pub template: Arc<Template>,
-    pub up: Option<Vec3>,
+    /// How to register it: what the configuration knows (up, facing, lost limbs).
+    pub fit_options: RegistrationOptions,
     pub cache_key: String,
     /// A cached fit and binding, when valid.
     pub cached: Option<(Skeleton, Binding)>,
@@ -120,12 +122,22 @@ pub fn load(
         source: e,
     })?;
     let template = Arc::new(Template::resolve(&entry.template)?);
-    let up = entry
-        .up
-        .as_deref()
-        .map(crate::cli::register::parse_axis)
-        .transpose()
-        .map_err(|e| Error::config(&path, format!("up axis: {e}")))?;
+    let axis = |a: &Option<String>, what: &str| {
+        a.as_deref()
+            .map(crate::cli::register::parse_axis)
+            .transpose()
+            .map_err(|e| Error::config(&path, format!("{what}: {e}")))
+    };
+    let up = axis(&entry.up, "up axis")?;
+    let front = axis(&entry.front, "facing")?;
+    crate::fakir::support::lost_from_names(&template, &entry.missing)
+        .map_err(|e| Error::config(&path, e.to_string()))?;
+    let fit_options = RegistrationOptions {
+        init: up.map(Init::Up).unwrap_or_default(),
+        front,
+        lost: entry.missing.clone(),
+        ..Default::default()
+    };
     let template_text = format!("{:?}", template);
     let key = format!(
         "{:016x}",
@@ -136,6 +148,7 @@ pub fn load(
             &(point_budget as u64).to_le_bytes(),
             &CACHE_VERSION.to_le_bytes(),
             format!("{up:?}").as_bytes(),
+            format!("{front:?} {:?}", entry.missing).as_bytes(),
         ])
     );
     let mut cloud = read_ply_with(&path, &ReadOptions::default())?;
@@ -146,7 +159,7 @@ pub fn load(
     Ok(Loaded {
         cloud: Arc::new(cloud),
         template,
-        up,
+        fit_options,
         cache_key: key,
         cached,
     })
@@ -211,7 +224,8 @@ pub struct CacheKey(pub String);
 #[derive(Component, Clone, Debug)]
 pub struct StatueTemplate {
     pub template: Arc<Template>,
-    pub up: Option<Vec3>,
+    /// How to register it ([`Loaded::fit_options`]).
+    pub fit_options: RegistrationOptions,
 }
 
 fn switch_statue(
@@ -319,7 +333,7 @@ fn finish_loading(
                     CacheKey(loaded.cache_key.clone()),
                     StatueTemplate {
                         template: loaded.template.clone(),
-                        up: loaded.up,
+                        fit_options: loaded.fit_options.clone(),
                     },
                 ));
                 match loaded.cached {

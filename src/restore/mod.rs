@@ -3,7 +3,7 @@
 //! the target's proportions and pose, then merged without a seam.
 //!
 //! ```text
-//! target cloud + fit ─► support (which bones are missing) ─► completed skeleton
+//! target cloud + fit ─► missing bones (the registration's verdict) ─► completed skeleton
 //! donor cloud + fit ─► transfer (scale + skin the donor's part onto the completed skeleton)
 //!                   ─► merge (eq. 5.1 in the overlap) ─► restored cloud + provenance
 //! ```
@@ -22,27 +22,55 @@ pub mod transfer;
 use crate::anatomy::Skeleton;
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
-use crate::fakir::support::{BoneSupport, complete, support};
+use crate::fakir::support::{BoneSupport, complete_with, support};
 use crate::math::Vec3;
 use merge::{MergeOptions, MergeStats, merge};
 use serde::Serialize;
-use transfer::{Part, PoseSource, TransferOptions, parts_from_support, transfer};
+use transfer::{Part, PoseSource, TransferOptions, parts_of, transfer};
 
 /// Where a restored point comes from.
 pub const FROM_TARGET: u32 = 0;
 
 /// One donor statue.
+#[derive(Clone)]
 pub struct Donor<'a> {
     pub name: String,
     pub cloud: &'a PointCloud,
     pub fit: &'a Skeleton,
+    /// The bones its registration found lost ([`crate::fakir::Fit::missing`]; `None`: not
+    /// known, judged by their support).
+    pub missing: Option<&'a [bool]>,
+}
+
+/// Which bones of `fit` are missing: the registration's verdict when there is one
+/// ([`crate::fakir::Fit::missing`], also in `FIT.json`: the lost limbs it found or was told
+/// of, already completed in `fit`), otherwise the support of its bones in `cloud`
+/// ([`crate::fakir::support`], for a skeleton that comes without one). One rule for the
+/// restoration, the kiosk's ghost limbs and `FIT.json`.
+pub fn missing_bones(
+    cloud: &PointCloud,
+    fit: &Skeleton,
+    verdict: Option<&[bool]>,
+) -> Result<Vec<bool>> {
+    let n = fit.template.bones.len();
+    match verdict {
+        Some(v) if v.len() == n => Ok(v.to_vec()),
+        Some(v) => Err(Error::input(format!(
+            "{} missing-bone flags for the {n} bones of template '{}'",
+            v.len(),
+            fit.template.name
+        ))),
+        None => Ok(support(cloud, fit)?.iter().map(|s| s.missing).collect()),
+    }
 }
 
 /// Options of a restoration.
 #[derive(Clone, Debug)]
 pub struct RestoreOptions {
-    /// Bones to restore (names); empty: every missing bone.
+    /// Bones to restore (names); empty: every missing bone ([`missing_bones`]).
     pub parts: Vec<String>,
+    /// The target registration's verdict on its missing bones ([`missing_bones`]).
+    pub target_missing: Option<Vec<bool>>,
     pub pose: PoseSource,
     pub transfer: TransferOptions,
     pub merge: MergeOptions,
@@ -52,6 +80,7 @@ impl Default for RestoreOptions {
     fn default() -> Self {
         RestoreOptions {
             parts: Vec::new(),
+            target_missing: None,
             pose: PoseSource::Donor,
             transfer: TransferOptions::default(),
             merge: MergeOptions::default(),
@@ -109,21 +138,23 @@ pub fn restore(
         return Err(Error::input("restore: no donor statue given"));
     }
     let t = &target_fit.template;
-    let mut sup = support(target, target_fit)?;
-    if !opts.parts.is_empty() {
-        for s in &mut sup {
-            s.missing = opts.parts.iter().any(|p| p == &s.bone);
-        }
+    let sup = support(target, target_fit)?;
+    let missing: Vec<bool> = if opts.parts.is_empty() {
+        missing_bones(target, target_fit, opts.target_missing.as_deref())?
+    } else {
+        let mut m = vec![false; t.bones.len()];
         for p in &opts.parts {
-            if !sup.iter().any(|s| &s.bone == p) {
-                return Err(Error::input(format!(
+            let k = t.bone_index(p).ok_or_else(|| {
+                Error::input(format!(
                     "restore: unknown bone '{p}' in template '{}'",
                     t.name
-                )));
-            }
+                ))
+            })?;
+            m[k] = true;
         }
-    }
-    let parts: Vec<Part> = parts_from_support(t, &sup);
+        m
+    };
+    let parts: Vec<Part> = parts_of(t, &missing);
     let listed: Vec<String> = sup
         .iter()
         .filter(|s| s.missing || s.partial)
@@ -141,8 +172,10 @@ pub fn restore(
             "restore: no missing part found on the target (name the bones with --parts)",
         ));
     }
-    let redo: Vec<bool> = sup.iter().map(|s| s.missing).collect();
-    let completed = complete(target_fit, &redo);
+    // Missing bones get their expected size and pose, as the registration completes the lost
+    // limbs it finds (the same again for those).
+    let healthy: Vec<bool> = missing.iter().map(|m| !m).collect();
+    let completed = complete_with(target_fit, &missing, Some(&healthy));
     // Start from the target's points.
     let mut assembly = Assembly::from_target(target, &completed);
     let mut reports = Vec::new();
@@ -151,9 +184,9 @@ pub fn restore(
         ..opts.transfer
     };
     // What each donor has (a donor missing a bone of the part cannot give it).
-    let donor_support: Vec<Vec<BoneSupport>> = donors
+    let donor_missing: Vec<Vec<bool>> = donors
         .iter()
-        .map(|d| support(d.cloud, d.fit))
+        .map(|d| missing_bones(d.cloud, d.fit, d.missing))
         .collect::<Result<_>>()?;
     // Each donor is bound once, when it first gives a part.
     let mut bindings: Vec<Option<crate::skinning::Binding>> = donors.iter().map(|_| None).collect();
@@ -161,7 +194,7 @@ pub fn restore(
         let mut last_err = None;
         let mut done = false;
         for (di, d) in donors.iter().enumerate() {
-            if let Err(e) = check_donor(t, &d.name, &donor_support[di], part) {
+            if let Err(e) = check_donor(t, &d.name, &donor_missing[di], part) {
                 last_err = Some(e);
                 continue;
             }
@@ -224,18 +257,18 @@ pub fn restore(
     })
 }
 
-/// Fails when the donor (support `donor_support`) lacks a bone of `part` too: a donor
-/// missing a bone of the part cannot give it.
+/// Fails when the donor (its missing bones `donor_missing`, [`missing_bones`]) lacks a bone
+/// of `part` too: a donor missing a bone of the part cannot give it.
 pub fn check_donor(
     t: &crate::anatomy::Template,
     donor: &str,
-    donor_support: &[BoneSupport],
+    donor_missing: &[bool],
     part: &Part,
 ) -> Result<()> {
     let lacking: Vec<&str> = part
         .bones
         .iter()
-        .filter(|&&k| donor_support.get(k).is_some_and(|s| s.missing))
+        .filter(|&&k| donor_missing.get(k).copied().unwrap_or(false))
         .map(|&k| t.bones[k].name.as_str())
         .collect();
     if lacking.is_empty() {

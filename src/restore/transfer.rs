@@ -14,7 +14,6 @@
 use crate::anatomy::{Skeleton, Template};
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
-use crate::fakir::support::BoneSupport;
 use crate::math::Vec3;
 use crate::skinning::{Binding, Method};
 use serde::Serialize;
@@ -38,10 +37,9 @@ pub struct Part {
     pub attach: Option<usize>,
 }
 
-/// Groups the missing bones into parts: each missing bone whose parent is present starts a
-/// part, which takes every missing bone below it.
-pub fn parts_from_support(t: &Template, support: &[BoneSupport]) -> Vec<Part> {
-    let missing: Vec<bool> = support.iter().map(|s| s.missing).collect();
+/// Groups the missing bones (`missing[k]`) into parts: each missing bone whose parent is
+/// present starts a part, which takes every missing bone below it.
+pub fn parts_of(t: &Template, missing: &[bool]) -> Vec<Part> {
     let mut parts = Vec::new();
     for (k, def) in t.bones.iter().enumerate() {
         if !missing[k] || def.parent.is_some_and(|p| missing[p]) {

@@ -111,6 +111,8 @@ pub struct Binding {
     pub(crate) bl_rigid: baseline::Rigid,
     /// The base's points, increasing (see the module docs).
     pub(crate) base: Vec<u32>,
+    /// The bones left out ([`Binding::new_without`]), one flag per bone; empty for none.
+    pub(crate) lost: Vec<bool>,
 }
 
 /// One point's binding, before splitting into arrays.
@@ -193,6 +195,19 @@ impl Binding {
         if t.bones.len() >= NONE as usize {
             return Err(Error::input("too many bones for a binding"));
         }
+        if !lost.is_empty() && lost.len() != t.bones.len() {
+            return Err(Error::input(format!(
+                "{} lost-bone flags for the {} bones of template '{}'",
+                lost.len(),
+                t.bones.len(),
+                t.name
+            )));
+        }
+        if !lost.is_empty() && lost.iter().all(|&l| l) {
+            return Err(Error::input(
+                "every bone is lost: nothing to bind the points to",
+            ));
+        }
         let (bones, prepared, tables) = prepare(fitted);
         let fit_grid_normals = tables.grid_normals();
         let normals = cloud.normals.as_deref();
@@ -242,7 +257,18 @@ impl Binding {
             points,
             fit_grid_normals,
             base: Vec::new(),
+            lost: if lost.iter().any(|&l| l) {
+                lost.to_vec()
+            } else {
+                Vec::new()
+            },
         })
+    }
+
+    /// The bones this binding leaves out (given to [`Binding::new_without`]: a statue's lost
+    /// limbs), one flag per bone; empty when none is.
+    pub fn lost(&self) -> &[bool] {
+        &self.lost
     }
 
     /// The same binding with the points `base` (indices, e.g. [`crate::cloud::base::Base`]'s)
@@ -321,6 +347,7 @@ impl Binding {
             bones,
             points,
             base: Vec::new(),
+            lost: Vec::new(),
         }
     }
 

@@ -1,10 +1,11 @@
 //! Saving and loading a [`Binding`] (so a kiosk starts at once on a statue it has seen).
 //!
-//! Format (little-endian): the magic `PYGBIND2`, the template name, the fitted skeleton's raw
+//! Format (little-endian): the magic `PYGBIND3`, the template name, the fitted skeleton's raw
 //! state (root position and rotation, block scale, per bone rotation, length and radii — raw
 //! `f32`s, so the reloaded skeleton is bit-identical), the point count, then every per-point
 //! array of [`super::binding::PointData`] in declaration order, then the base's point count
-//! (`u64`) and its indices (`u32`, increasing). The per-bone part and the
+//! (`u64`) and its indices (`u32`, increasing), then the count of bones left out
+//! ([`Binding::lost`], `u64`) and their indices (`u32`, increasing). The per-bone part and the
 //! fitted pose's baseline tables are recomputed from the skeleton (a pure function of it), so
 //! a reloaded binding deforms exactly like the original. The file is written to a temporary
 //! sibling and renamed; loading checks every index and count against the file's size and the
@@ -17,7 +18,7 @@ use crate::math::{Quat, Vec3};
 use std::path::Path;
 use std::sync::Arc;
 
-const MAGIC: &[u8; 8] = b"PYGBIND2";
+const MAGIC: &[u8; 8] = b"PYGBIND3";
 
 struct Writer(Vec<u8>);
 
@@ -133,6 +134,13 @@ impl Binding {
         for &i in &self.base {
             w.u32(i);
         }
+        let lost: Vec<u32> = (0..self.lost.len() as u32)
+            .filter(|&b| self.lost[b as usize])
+            .collect();
+        w.u64(lost.len() as u64);
+        for b in lost {
+            w.u32(b);
+        }
         let tmp = path.with_extension("tmp-binding");
         std::fs::write(&tmp, &w.0)
             .and_then(|_| std::fs::rename(&tmp, path))
@@ -239,11 +247,26 @@ impl Binding {
         if base.windows(2).any(|w| w[0] >= w[1]) || base.last().is_some_and(|&i| i as usize >= n) {
             return Err(r.err("base indices out of order or out of range"));
         }
+        let nlost = r.u64()?;
+        if nlost >= nb as u64 {
+            return Err(r.err("more lost bones than the skeleton can lose"));
+        }
+        let lost_bones: Vec<u32> = (0..nlost).map(|_| r.u32()).collect::<Result<_>>()?;
+        if lost_bones.windows(2).any(|w| w[0] >= w[1])
+            || lost_bones.last().is_some_and(|&b| b as usize >= nb)
+        {
+            return Err(r.err("lost bone indices out of order or out of range"));
+        }
+        let mut lost = vec![false; if nlost > 0 { nb } else { 0 }];
+        for b in lost_bones {
+            lost[b as usize] = true;
+        }
         if r.at != bytes.len() {
             return Err(r.err("trailing bytes"));
         }
         let mut b = Binding::from_parts(fitted, pts);
         b.base = base;
+        b.lost = lost;
         b.validate().map_err(|m| r.err(&m))?;
         Ok(b)
     }
