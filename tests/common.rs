@@ -40,3 +40,15 @@ pub fn scratch(name: &str) -> PathBuf {
     std::fs::create_dir_all(&dir).expect("create scratch dir");
     dir
 }
+
+/// The bones a synthetic statue's cuts took every point from (what a registration of it
+/// should report lost), one flag per bone.
+pub fn cut_bones(s: &pygmalion::synth::SynthStatue) -> Vec<bool> {
+    let mut counts = vec![0usize; s.truth.bones.len()];
+    for &b in &s.labels {
+        if let Some(c) = counts.get_mut(b as usize) {
+            *c += 1;
+        }
+    }
+    counts.iter().map(|&c| c == 0).collect()
+}

@@ -670,22 +670,7 @@ fn registration_fits_rest_pose_quadruped_centaur_and_mermaid() {
 
 /// A synthetic human in a random pose with ±30% proportions (the test population).
 fn posed_human(seed: u64, points: usize) -> SynthStatue {
-    use pygmalion::anatomy::Template;
-    use pygmalion::synth::{SynthOptions, generate};
-    let t = std::sync::Arc::new(Template::builtin("human").unwrap());
-    generate(
-        t,
-        &SynthOptions {
-            points,
-            seed,
-            rigid: true,
-            random_pose: true,
-            proportion_jitter: 0.3,
-            height: 1.7,
-            ..Default::default()
-        },
-    )
-    .unwrap()
+    cut_human(seed, points, &[])
 }
 
 /// Mean angle (degrees) between corresponding bone directions of the limb chains.

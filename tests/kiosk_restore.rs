@@ -82,13 +82,8 @@ fn setup(dir: &Path, statues: &[(&str, &SynthStatue, bool)]) -> KioskConfig {
         .unwrap();
         if *cached {
             let l = load(&c.assets_root, &c.cache_dir, entry, c.budget.point_budget).unwrap();
-            // The registration's verdict on its lost limbs, as the generator knows them: the
-            // bones that lost every point to the cuts.
-            let mut counts = vec![0usize; s.truth.bones.len()];
-            for &b in &s.labels {
-                counts[b as usize] += 1;
-            }
-            let lost: Vec<bool> = counts.iter().map(|&c| c == 0).collect();
+            // The registration's verdict on its lost limbs, as the generator knows them.
+            let lost = crate::common::cut_bones(s);
             let b = Binding::new_without(&l.cloud, &s.truth, &lost).unwrap();
             write_cache(&c.cache_dir, &l.cache_key, &s.truth, &b);
         }
