@@ -113,13 +113,7 @@ impl FitReport {
                 cut: b.cut,
                 points: b.points.len(),
             }),
-            missing: t
-                .bones
-                .iter()
-                .zip(&fit.missing)
-                .filter(|(_, m)| **m)
-                .map(|(b, _)| b.name.clone())
-                .collect(),
+            missing: fit.missing_names().into_iter().map(String::from).collect(),
             partial: fit
                 .support
                 .iter()
@@ -260,13 +254,7 @@ pub fn fit(
         Some(b) => format!(" (a base of {} points set aside)", b.points.len()),
         None => String::new(),
     };
-    let lost: Vec<&str> = template
-        .bones
-        .iter()
-        .zip(&fit.missing)
-        .filter(|(_, m)| **m)
-        .map(|(b, _)| b.name.as_str())
-        .collect();
+    let lost = fit.missing_names();
     let lost = if lost.is_empty() {
         String::new()
     } else {

@@ -200,6 +200,17 @@ pub struct Fit {
     pub missing: Vec<bool>,
 }
 
+impl Fit {
+    /// The names of the bones in [`Fit::missing`].
+    pub fn missing_names(&self) -> Vec<&str> {
+        let t = &self.skeleton.template;
+        (0..t.bones.len())
+            .filter(|&b| self.missing.get(b).copied().unwrap_or(false))
+            .map(|b| t.bones[b].name.as_str())
+            .collect()
+    }
+}
+
 /// Refuses clouds with fewer than 20 points per bone of the template (`what` names them).
 fn check_point_count(count: usize, template: &Template, what: &str) -> Result<()> {
     let min_points = 20 * template.bones.len();
@@ -525,7 +536,8 @@ pub fn register(
     s.refresh().map_err(cancelled)?;
     // Missing limbs (level 6): those known, and those found when `missing` is on.
     let (support, missing) = if opts.missing || any_given {
-        let mut support = examine_support(&mut s, &level0_points)?;
+        let (tree, rho) = support_points(&mut s, &level0_points)?;
+        let mut support = examine_support(&mut s, &tree, rho)?;
         let missing = if opts.missing {
             lost_limbs(&mut s, &support, &given_lost)?
         } else {
@@ -535,7 +547,7 @@ pub fn register(
             iterations += settle_lost_limbs(&mut s, &missing, opts)?;
             // What the scan covers of the completed skeleton: a limb broken part-way along
             // a bone shows how far its support reaches.
-            support = examine_support(&mut s, &level0_points)?;
+            support = examine_support(&mut s, &tree, rho)?;
         }
         (support, missing)
     } else {
@@ -569,18 +581,32 @@ pub fn register(
     })
 }
 
-/// The support of every bone of the fit `s` ([`super::support`]) on the level-0 points
-/// (`points`, a subsample of the figure: support is judged relative to the sampling
-/// density), one work unit for the k-d tree and spacing, then one per bone.
-fn examine_support(s: &mut Solver, points: &[Vec3]) -> Result<Vec<BoneSupport>> {
+/// The k-d tree and mean spacing of the points support is judged on (the level-0 points, a
+/// subsample of the figure: support is judged relative to the sampling density), built once
+/// for level 6 in one work unit.
+fn support_points(
+    s: &mut Solver,
+    points: &[Vec3],
+) -> Result<(kiddo::ImmutableKdTree<f32, 3>, f32)> {
     s.activity.phase = "support";
     let arr: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
     let tree = kiddo::ImmutableKdTree::<f32, 3>::new_from_slice(&arr)
         .map_err(|e| Error::input(format!("support: k-d tree: {e:?}")))?;
     let rho = mean_spacing(points, &tree);
     s.unit().map_err(cancelled)?;
+    Ok((tree, rho))
+}
+
+/// The support of every bone of the fit `s` ([`super::support`]) on the points of `tree`
+/// (mean spacing `rho`, [`support_points`]): one work unit for the set-up, then one per bone.
+fn examine_support(
+    s: &mut Solver,
+    tree: &kiddo::ImmutableKdTree<f32, 3>,
+    rho: f32,
+) -> Result<Vec<BoneSupport>> {
+    s.activity.phase = "support";
     let fitted = s.world.to_skeleton();
-    let exam = SupportExam::new(&tree, rho, &fitted);
+    let exam = SupportExam::new(tree, rho, &fitted);
     s.unit().map_err(cancelled)?;
     let mut out = Vec::with_capacity(fitted.bones.len());
     for k in 0..fitted.bones.len() {

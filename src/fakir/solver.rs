@@ -197,10 +197,7 @@ impl<'p> Solver<'p> {
     /// unit each) and the schedule leaves them where they are
     /// ([`Solver::present_prefix`]).
     pub fn set_absent(&mut self, absent: &[bool]) -> Result<(), Cancelled> {
-        self.absent = absent.to_vec();
-        for (b, &a) in absent.iter().enumerate() {
-            self.assignment.enabled[b] = !a;
-        }
+        self.start_absent(absent);
         let n = self.assignment.len();
         for start in (0..n).step_by(MAX_REFRESH_SLICE) {
             self.assignment
@@ -215,8 +212,13 @@ impl<'p> Solver<'p> {
     /// refresh labels every point): no work unit.
     pub fn start_absent(&mut self, absent: &[bool]) {
         self.absent = absent.to_vec();
-        for (b, &a) in absent.iter().enumerate() {
-            self.assignment.enabled[b] = !a;
+        self.enable_present();
+    }
+
+    /// Lets the assignment give points to the present bones only.
+    fn enable_present(&mut self) {
+        for (b, &lost) in self.absent.iter().enumerate() {
+            self.assignment.enabled[b] = !lost;
         }
     }
 
@@ -307,9 +309,7 @@ impl<'p> Solver<'p> {
     /// bones stay absent.
     pub fn set_assignment(&mut self, a: Assignment) {
         self.assignment = a;
-        for (b, &lost) in self.absent.iter().enumerate() {
-            self.assignment.enabled[b] = !lost;
-        }
+        self.enable_present();
         let n = self.world.template.bones.len();
         self.assigned_bones =
             vec![Bone::new(Vec3::splat(f32::NAN), 0.0, Vec3::splat(f32::NAN), 0.0); n];

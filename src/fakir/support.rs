@@ -158,6 +158,7 @@ pub fn complete_with(fitted: &Skeleton, redo: &[bool], healthy: Option<&[bool]>)
     let (sizes, shrunk) = expected_sizes(fitted, healthy);
     let mir = mirrors(t);
     let rest = Skeleton::rest(t.clone());
+    let fitted_pose = fitted.pose();
     let mut s = fitted.clone();
     for k in 0..t.bones.len() {
         if !redo[k] {
@@ -175,8 +176,7 @@ pub fn complete_with(fitted: &Skeleton, redo: &[bool], healthy: Option<&[bool]>)
             .unwrap_or(s.root_rotation);
         match mir[k] {
             Some(m) if healthy.map_or(!shrunk[m] && !redo[m], |h| h[m]) => {
-                let fp = fitted.pose();
-                let want = reflect(fp.frames[m] * Vec3::X, fitted.root_rotation);
+                let want = reflect(fitted_pose.frames[m] * Vec3::X, fitted.root_rotation);
                 let world_now = parent_frame * (rest.bones[k].rotation * Vec3::X);
                 let world = rotation_arc(world_now, want) * parent_frame * rest.bones[k].rotation;
                 s.bones[k].rotation = (parent_frame.inverse() * world).normalize();

@@ -558,8 +558,20 @@ impl PreparedBone {
 /// The bone of `bones` whose surface is nearest to `p` by (fast) signed distance — for a point
 /// inside overlapping bones, the deepest one — with that distance. `(0, ∞)` without bones.
 pub fn nearest_bone(bones: &[PreparedBone], p: Vec3) -> (usize, f32) {
+    nearest_bone_where(bones, p, |_| true)
+}
+
+/// [`nearest_bone`] among the bones `k` for which `keep(k)` holds (`(0, ∞)` when none does).
+pub fn nearest_bone_where(
+    bones: &[PreparedBone],
+    p: Vec3,
+    keep: impl Fn(usize) -> bool,
+) -> (usize, f32) {
     let mut best = (0, f32::INFINITY);
     for (k, b) in bones.iter().enumerate() {
+        if !keep(k) {
+            continue;
+        }
         let d = b.sdf_fast(p);
         if d < best.1 {
             best = (k, d);

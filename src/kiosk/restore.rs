@@ -692,9 +692,8 @@ struct Analysis {
 /// binding leaves them out: [`Binding::lost`]), as for `restore` and `FIT.json`
 /// ([`crate::restore::missing_bones`]); the support of every bone is measured too, for the
 /// operator.
-fn analyse_statue(cloud: &PointCloud, fit: &Skeleton, lost: &[bool]) -> Result<Analysis> {
+fn analyse_statue(cloud: &PointCloud, fit: &Skeleton, missing: Vec<bool>) -> Result<Analysis> {
     let sup = support(cloud, fit)?;
-    let missing = lost_flags(fit, lost);
     let parts = parts_of(&fit.template, &missing);
     let healthy: Vec<bool> = missing.iter().map(|m| !m).collect();
     let completed = complete_with(fit, &missing, Some(&healthy));
@@ -709,16 +708,6 @@ fn analyse_statue(cloud: &PointCloud, fit: &Skeleton, lost: &[bool]) -> Result<A
         completed,
         bone,
     })
-}
-
-/// A binding's lost bones as one flag per bone of `fit`'s template (none when it has none).
-fn lost_flags(fit: &Skeleton, lost: &[bool]) -> Vec<bool> {
-    let n = fit.template.bones.len();
-    if lost.len() == n {
-        lost.to_vec()
-    } else {
-        vec![false; n]
-    }
 }
 
 fn load_donor(
@@ -768,7 +757,7 @@ fn load_donor(
             )));
         }
     };
-    let missing = lost_flags(&fit, binding.lost());
+    let missing = binding.lost_bones();
     Ok(DonorData {
         cloud: loaded.cloud,
         fit,
@@ -1253,10 +1242,10 @@ fn analyse(
         }
         let cloud = cloud.0.clone();
         let fit = fit.0.clone();
-        let binding = binding.0.clone();
-        commands.entity(e).insert(background(move || {
-            analyse_statue(&cloud, &fit, binding.lost())
-        }));
+        let missing = binding.0.lost_bones();
+        commands
+            .entity(e)
+            .insert(background(move || analyse_statue(&cloud, &fit, missing)));
     }
     for (e, statue, cloud, fit, binding, pending) in &done {
         let Some(result) = pending.take() else {

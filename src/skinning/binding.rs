@@ -271,6 +271,16 @@ impl Binding {
         &self.lost
     }
 
+    /// [`Binding::lost`] as one flag per bone of the fitted template, also when none is lost.
+    pub fn lost_bones(&self) -> Vec<bool> {
+        let n = self.fitted.template.bones.len();
+        if self.lost.len() == n {
+            self.lost.clone()
+        } else {
+            vec![false; n]
+        }
+    }
+
     /// The same binding with the points `base` (indices, e.g. [`crate::cloud::base::Base`]'s)
     /// held as the statue's base (see the module docs). Errors: an index out of range.
     pub fn with_base(mut self, base: &[u32]) -> Result<Binding> {
@@ -457,18 +467,7 @@ fn bind_point(
     let is_lost = |b: usize| lost.get(b).copied().unwrap_or(false);
     // Nearest bone by (fast) signed distance (lost bones left out), then the exact
     // projection on it.
-    let k = if lost.iter().any(|&l| l) {
-        let mut best = (0, f32::INFINITY);
-        for (b, pb) in prepared.iter().enumerate() {
-            let d = pb.sdf_fast(p);
-            if !is_lost(b) && d < best.1 {
-                best = (b, d);
-            }
-        }
-        best.0
-    } else {
-        crate::geometry::bone::nearest_bone(prepared, p).0
-    };
+    let (k, _) = crate::geometry::bone::nearest_bone_where(prepared, p, |b| !is_lost(b));
     let proj = prepared[k].project(p);
     let bb = &bones[k];
     let inv = bb.frame.inverse();
