@@ -308,6 +308,139 @@ height = {HEIGHT}
     assert!(statue > 0.5, "the statue covers {statue:.2} of the centre");
 }
 
+/// Fraction of statue pixels over the shoulders, beside the head: the top of the scene band,
+/// a tenth of the window wide on either side of the middle fifth.
+fn over_the_shoulders(img: &Image) -> f32 {
+    let top = pygmalion::kiosk::ui::SCENE_TOP_PX / HEIGHT as f32;
+    let rows = (top + 0.01, top + 0.09);
+    let statue = |c: [u8; 3]| !is_background(c);
+    0.5 * (fraction(img, (0.34, 0.44), rows, statue) + fraction(img, (0.56, 0.66), rows, statue))
+}
+
+#[test]
+fn kiosk_screenshot_keeps_the_pose_asked_for_past_the_idle_timeouts() {
+    use pygmalion::anatomy::Template;
+    use pygmalion::cloud::ply::{WriteOptions, write_ply};
+    use pygmalion::kiosk::config::{KioskConfig, StatueEntry};
+    use pygmalion::kiosk::statue::{load, write_cache};
+    use pygmalion::skinning::Binding;
+    use pygmalion::synth::{SynthOptions, generate};
+    use std::sync::Arc;
+    if !enabled() {
+        println!("skipped: needs a display and Vulkan (PYGMALION_RENDER_TESTS=1)");
+        return;
+    }
+    let dir = scratch("kiosk_render_pose");
+    // A synthetic statue in the rest pose (arms down), fitted (its ground truth cached).
+    let t = Arc::new(Template::builtin("human").unwrap());
+    let s = generate(
+        t,
+        &SynthOptions {
+            points: 12_000,
+            seed: 8,
+            random_pose: false,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    write_ply(dir.join("statue.ply"), &s.cloud, &WriteOptions::default()).unwrap();
+    let entry = StatueEntry {
+        file: "statue.ply".into(),
+        template: "human".into(),
+        title: "Statue".into(),
+        ..Default::default()
+    };
+    let cfg = KioskConfig {
+        assets_root: dir.clone(),
+        cache_dir: dir.join("cache"),
+        ..Default::default()
+    };
+    let l = load(&dir, &cfg.cache_dir, &entry, 100_000).unwrap();
+    write_cache(
+        &cfg.cache_dir,
+        &l.cache_key,
+        &s.truth,
+        &Binding::new(&l.cloud, &s.truth).unwrap(),
+    );
+    // Idle timeouts far shorter than the run: before the fix, attract mode turned the camera
+    // and changed the pose, and the reset brought the statue back to its own pose.
+    let config = dir.join("kiosk.toml");
+    std::fs::write(
+        &config,
+        format!(
+            r#"assets_root = "{root}"
+cache_dir = "{cache}"
+
+[[statues]]
+file = "statue.ply"
+template = "human"
+title = "Statue"
+
+[budget]
+point_budget = 100000
+
+[idle]
+attract_after_s = 1.0
+still_there_after_s = 2.0
+countdown_s = 1.0
+
+[render]
+background = [{r}, {g}, {b}]
+
+[window]
+width = {WIDTH}
+height = {HEIGHT}
+"#,
+            root = dir.display(),
+            cache = cfg.cache_dir.display(),
+            r = BACKGROUND[0],
+            g = BACKGROUND[1],
+            b = BACKGROUND[2],
+        ),
+    )
+    .unwrap();
+    let shoot = |name: &str, extra: &[&str]| -> Image {
+        let shot = dir.join(name);
+        let mut args = vec![
+            "kiosk",
+            "--config",
+            config.to_str().unwrap(),
+            "--screenshot",
+            shot.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let (ok, log) = run_kiosk(&dir, &args, Duration::from_secs(300));
+        assert!(ok, "the kiosk failed or hung; its log:\n{log}");
+        Image::load_png(&shot).unwrap()
+    };
+    let own = shoot("own.png", &["--frames", "10"]);
+    // Long enough for several seconds of idle time on any machine that draws it (a software
+    // renderer draws a few tens of frames a second at most).
+    let raised = shoot("raised.png", &["--frames", "200", "--pose", "arms_raised"]);
+    // Nothing covers the scene (the "still there?" overlay did): its side margins are bare.
+    for (name, img) in [("own", &own), ("raised", &raised)] {
+        let bare = fraction(img, (0.01, 0.08), (0.2, 0.8), is_background).min(fraction(
+            img,
+            (0.92, 0.99),
+            (0.2, 0.8),
+            is_background,
+        ));
+        assert!(bare > 0.98, "{name}: the scene is covered ({bare:.2} bare)");
+    }
+    // The camera is framed on the statue as scanned (arms down): raised arms fill the top of
+    // the scene beside the head, where the statue's own pose leaves it empty.
+    let (own, raised) = (over_the_shoulders(&own), over_the_shoulders(&raised));
+    println!("statue pixels over the shoulders: own pose {own:.3}, arms raised {raised:.3}");
+    assert!(
+        own < 0.01,
+        "the statue's own pose already fills the top ({own:.3})"
+    );
+    assert!(
+        raised > 0.05,
+        "the raised arms do not show ({raised:.3} of the top beside the head)"
+    );
+}
+
 // The renderer's CPU-side pieces (no GPU needed).
 
 mod parts {

@@ -14,8 +14,11 @@
 //!   captured and written to `OUT.png` with the crate's PNG encoder
 //!   ([`crate::render::Image::save_png`]); the kiosk then exits. In this mode the window is
 //!   windowed at the configured size, pipelines compile synchronously (the first frames are
-//!   not blank), and the run stops with an error if no picture was written after `N + 600`
-//!   frames. The mean frame time is printed at the end.
+//!   not blank), attract mode and the idle reset are off (they would turn the camera and undo
+//!   the pose), and the run stops with an error if no picture was written after `N + 600`
+//!   frames, not counting the frames while a statue is still loading, fitting or binding (a
+//!   live fit under a software renderer takes thousands). The mean frame time is printed at
+//!   the end.
 
 use crate::error::{Error, Result};
 use crate::kiosk::config::KioskConfig;
@@ -58,6 +61,9 @@ struct ScreenshotPlan {
     frames: u32,
     frame: u32,
     settled: u32,
+    /// Frames during which a statue was loading, fitting or binding (not counted towards
+    /// giving up).
+    busy: u32,
     requested: bool,
     result: Arc<Mutex<Option<std::result::Result<(), String>>>>,
     /// Sum and count of frame times (seconds) after the first frames.
@@ -79,8 +85,14 @@ pub fn run(args: &KioskArgs) -> Result<()> {
              (picture, film, repose, register, restore, …) works without a display.",
         ));
     }
-    let config = KioskConfig::load(args.config);
+    let mut config = KioskConfig::load(args.config);
     let screenshot = args.screenshot.map(Path::to_path_buf);
+    if screenshot.is_some() {
+        // A picture shows the state asked for: attract mode would turn the camera and change
+        // the pose, and the reset would undo `--pose`, while a slow machine is still fitting.
+        config.idle.attract_after_s = f32::INFINITY;
+        config.idle.still_there_after_s = f32::INFINITY;
+    }
     if let Some(path) = &screenshot
         && let Some(dir) = path.parent()
         && !dir.as_os_str().is_empty()
@@ -139,6 +151,7 @@ pub fn run(args: &KioskArgs) -> Result<()> {
                 frames: args.frames,
                 frame: 0,
                 settled: 0,
+                busy: 0,
                 requested: false,
                 result: Arc::new(Mutex::new(None)),
                 frame_time: (0.0, 0),
@@ -200,6 +213,14 @@ fn drive_screenshot(
     let failed = states
         .iter()
         .any(|s| matches!(s, StatueState::Failed { .. }));
+    if states.iter().any(|s| {
+        matches!(
+            s,
+            StatueState::Loading | StatueState::Fitting { .. } | StatueState::Binding
+        )
+    }) {
+        plan.busy += 1;
+    }
     let pose_done = match &pose {
         None => true,
         Some(p) => p.sent && animating.is_empty(),
@@ -247,7 +268,12 @@ fn drive_screenshot(
             },
         );
     }
-    if plan.frame > plan.frames.saturating_add(SAFETY_FRAMES) {
+    if plan.frame
+        > plan
+            .frames
+            .saturating_add(SAFETY_FRAMES)
+            .saturating_add(plan.busy)
+    {
         error!(
             "no screenshot after {} frames (the statue was {}drawn); giving up",
             plan.frame,
