@@ -243,9 +243,14 @@ pub fn range_excess(t: &Template, rest_frames: &[Quat], b: usize, dir: Vec3) -> 
 
 /// How far a skeleton's pose lies outside the template's joint ranges (radians, summed over
 /// bones, [`range_excess`] of each bone's direction relative to its parent, compared at the
-/// rest pose). Zero for any pose the synthetic generator can draw; a figure fitted facing
-/// backwards pays for its feet and knees.
+/// rest pose), measured on the skeleton untwisted
+/// ([`super::world::WorldSkeleton::untwisted`]): a fit's twists are left to chance, and a
+/// hinge's range is stated in its parent's frame. Nearly zero for any pose the synthetic
+/// generator can draw; a figure fitted facing backwards pays for its feet and knees.
 pub fn implausibility(s: &Skeleton) -> f64 {
+    let s = &super::world::WorldSkeleton::from_skeleton(s)
+        .untwisted()
+        .to_skeleton();
     let t = &s.template;
     let rest = Skeleton::rest(s.template.clone());
     let frames = crate::anatomy::skeleton::rest_frames(t);

@@ -16,6 +16,13 @@
 //! 3. **Scale restarts** ([`super::init`], step 7): the chosen finalist's orientation is
 //!    registered again on the same points from each of `rescales` times its scale; the
 //!    lowest two-sided score among these and the finalist wins (ties to the finalist).
+//!    **Facing check** (our choice; skipped with a facing hint or a given skeleton): the
+//!    winner is turned around ([`WorldSkeleton::turned_around`]: the same limbs with left
+//!    and right exchanged, the trunk facing the other way) and registered again on the same
+//!    points; the finalists' rule decides between the two ([`prefer`]). A human seen from
+//!    the front or the back is nearly the same surface, so the two facings' scores are close
+//!    and a fit can settle facing backwards; facing the wrong way its knees, elbows and feet
+//!    bend outside their ranges.
 //! 4. **Level 1** (clouds larger than the subsample): the assignment is redone on all points
 //!    and the schedule refines the skeleton (`final_iterations` whole-skeleton iterations,
 //!    default 2: over 32 synthetic statues a second one lowered the mean joint error from
@@ -71,7 +78,7 @@ use super::init::{Candidate, Init, candidates, rescaled};
 use super::schedule::{ScheduleSettings, register_skeleton};
 use super::solver::{Activity, Cancelled, NoPause, Pause, Solver, SolverSettings, template_extent};
 use super::support::{
-    BoneSupport, SupportExam, collapse, complete_with, lost_from_names, mean_spacing,
+    BoneSupport, SupportExam, collapse, complete_with, lost_from_names, mean_spacing, mirrors,
 };
 use super::world::WorldSkeleton;
 use crate::anatomy::template::BoneKind;
@@ -433,7 +440,7 @@ pub fn register(
     } else {
         &[]
     };
-    let runs = order.len() + rescales.len();
+    let runs = order.len() + rescales.len() + 1;
     let full = FullRun {
         positions,
         normals: &normals,
@@ -455,7 +462,7 @@ pub fn register(
     let pick = finals
         .iter()
         .enumerate()
-        .filter(|(_, f)| f.score <= 1.5 * best_score)
+        .filter(|(_, f)| f.score <= NEAR_TIE * best_score)
         .min_by(|(_, a), (_, b)| {
             a.implausible
                 .total_cmp(&b.implausible)
@@ -475,6 +482,22 @@ pub fn register(
         let sp = span(finalists_start, level1_start, order.len() + j, runs);
         let r = full.run(chosen, &c, pause, &mut fraction, sp)?;
         if r.score < best.score {
+            best = r;
+        }
+    }
+    // The facing check (see the module docs): the fit turned around, registered again.
+    if opts.front.is_none() && !matches!(opts.init, Init::Given(_)) {
+        let mut turned = best.world.turned_around(&mirrors(&template)).to_skeleton();
+        if any_given {
+            collapse(&mut turned, &given_lost);
+        }
+        let c = Candidate {
+            skeleton: turned,
+            scale: best.scale,
+        };
+        let sp = span(finalists_start, level1_start, runs - 1, runs);
+        let r = full.run(chosen, &c, pause, &mut fraction, sp)?;
+        if prefer(&r, &best) {
             best = r;
         }
     }
@@ -729,6 +752,24 @@ struct FullRun<'a> {
     /// Bones known lost (`RegistrationOptions::lost`), absent in every solver.
     lost: &'a [bool],
 }
+
+/// Whether fit `a` is preferred to fit `b` by the finalists' rule: within [`NEAR_TIE`] of the
+/// lower two-sided score, the more plausible pose wins, then the lower score.
+fn prefer(a: &FullFit, b: &FullFit) -> bool {
+    let low = a.score.min(b.score);
+    match (a.score <= NEAR_TIE * low, b.score <= NEAR_TIE * low) {
+        (true, false) => true,
+        (false, true) => false,
+        _ => a
+            .implausible
+            .total_cmp(&b.implausible)
+            .then(a.score.total_cmp(&b.score))
+            .is_lt(),
+    }
+}
+
+/// Near-ties of two-sided scores (factor) that anatomy decides ([`prefer`]).
+const NEAR_TIE: f64 = 1.5;
 
 /// The outcome of a full level-0 registration.
 struct FullFit {

@@ -236,6 +236,85 @@ impl WorldSkeleton {
         self.lengths[b] = len;
     }
 
+    /// The skeleton **turned around**: the same figure fitted facing the other way, with left
+    /// and right exchanged (the hypothesis of the registration's facing check). The root
+    /// block turns half a turn about the figure's up axis through the root joint, so its left
+    /// and right sides change places; every bone of a mirrored pair (`mirror`, see
+    /// [`crate::fakir::support::mirrors`]) takes its mirror's direction, length and radii, so
+    /// the limbs stay where they lay with their labels exchanged; an unpaired bone keeps its
+    /// own. Frames as in [`WorldSkeleton::untwisted`]. The block's own bones turn with it;
+    /// their radii are exchanged with their mirror's (the block bone from the same joint whose
+    /// rest vector is reflected across the template's `x = 0` plane), as are the shared joint
+    /// radii of the limbs hanging from them.
+    pub fn turned_around(&self, mirror: &[Option<usize>]) -> WorldSkeleton {
+        let t = self.template.clone();
+        let mut mirror = mirror.to_vec();
+        let rest_vec = |b: usize| t.joints[t.bones[b].to].rest - t.joints[t.bones[b].from].rest;
+        for i in t.block_bones() {
+            if mirror[i].is_none() {
+                let v = rest_vec(i);
+                let reflected = Vec3::new(-v.x, v.y, v.z);
+                mirror[i] = t.block_bones().find(|&j| {
+                    t.bones[j].from == t.bones[i].from
+                        && (rest_vec(j) - reflected).length() <= 1e-4 * v.length().max(1e-6)
+                });
+            }
+        }
+        let up = self.root_rotation * Vec3::Y;
+        let root =
+            (Quat::from_axis_angle(up, std::f32::consts::PI) * self.root_rotation).normalize();
+        self.rebuilt(root, &mirror)
+    }
+
+    /// The same bones without twist: each free bone's frame is its rest frame relative to its
+    /// parent swung minimally onto its direction (positions, lengths and radii unchanged).
+    /// FAKIR moves a bone by rotations about axes across it, which leave its twist to chance,
+    /// and a hinge's range is stated in its parent's frame: a knee measured against a thigh
+    /// twisted by a quarter turn seems bent sideways. Untwisted, the hinge axes follow the
+    /// trunk's frame down each chain, as at rest.
+    pub fn untwisted(&self) -> WorldSkeleton {
+        self.rebuilt(self.root_rotation, &vec![None; self.template.bones.len()])
+    }
+
+    /// The skeleton with root rotation `root`, each bone `i` taking the direction, length and
+    /// radii of bone `mirror[i]` (itself when `None`), free frames swung minimally from rest.
+    fn rebuilt(&self, root: Quat, mirror: &[Option<usize>]) -> WorldSkeleton {
+        let t = self.template.clone();
+        let posed = self.pose();
+        let mut out = self.clone();
+        out.root_rotation = root;
+        for (i, m) in mirror.iter().enumerate() {
+            let src = m.unwrap_or(i);
+            out.lengths[i] = self.lengths[src];
+            out.r1[i] = self.r1[src];
+            out.r2[i] = self.r2[src];
+        }
+        // Two passes: a follower's leader may come after its children in bone order.
+        for _ in 0..2 {
+            for (i, def) in t.bones.iter().enumerate() {
+                let parent = def.parent.map_or(out.root_rotation, |p| out.frames[p]);
+                match def.kind {
+                    BoneKind::Free => {
+                        let base = parent * self.rest_relative[i];
+                        let axis = base * Vec3::X;
+                        let b = posed.bones[mirror[i].unwrap_or(i)];
+                        let d = (b.c2 - b.c1).try_normalize().unwrap_or(axis);
+                        out.frames[i] =
+                            (crate::geometry::frames::rotation_arc(axis, d) * base).normalize();
+                    }
+                    BoneKind::Block => {
+                        out.frames[i] = (out.root_rotation * self.rest_relative[i]).normalize();
+                    }
+                    BoneKind::Follower { leader, .. } => {
+                        out.frames[i] = (out.frames[leader] * self.rest_relative[i]).normalize();
+                    }
+                }
+            }
+        }
+        out.enforce();
+        out
+    }
+
     /// Direction of bone `b` relative to its parent, expressed in the template's rest frame
     /// (what [`crate::fakir::init::range_excess`] measures).
     pub fn direction_at_rest(&self, b: usize) -> Vec3 {
