@@ -267,7 +267,8 @@ impl WorldSkeleton {
     }
 
     /// The same bones without twist: each free bone's frame is its rest frame relative to its
-    /// parent swung minimally onto its direction (positions, lengths and radii unchanged).
+    /// parent swung minimally onto its direction (lengths and radii unchanged, and positions,
+    /// except a follower's that leaves its leader's axis: it follows the leader's new frame).
     /// FAKIR moves a bone by rotations about axes across it, which leave its twist to chance,
     /// and a hinge's range is stated in its parent's frame: a knee measured against a thigh
     /// twisted by a quarter turn seems bent sideways. Untwisted, the hinge axes follow the
