@@ -8,7 +8,7 @@
 
 use crate::common::{root, scratch};
 use pygmalion::render::Image;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -198,13 +198,70 @@ height = {HEIGHT}
     );
 }
 
-#[test]
-fn kiosk_screenshot_shows_ghost_bones_on_a_broken_statue() {
-    use pygmalion::anatomy::Template;
+/// Writes `s` as `statue.ply` in `dir`, caches its ground truth as the kiosk's fit (the cut
+/// bones lost, as a registration's verdict would have them), and writes a configuration
+/// showing it alone (`extra`: more TOML sections). Returns the configuration's path.
+fn fitted_synthetic_statue(dir: &Path, s: &pygmalion::synth::SynthStatue, extra: &str) -> PathBuf {
     use pygmalion::cloud::ply::{WriteOptions, write_ply};
     use pygmalion::kiosk::config::{KioskConfig, StatueEntry};
     use pygmalion::kiosk::statue::{load, write_cache};
     use pygmalion::skinning::Binding;
+    write_ply(dir.join("statue.ply"), &s.cloud, &WriteOptions::default()).unwrap();
+    let entry = StatueEntry {
+        file: "statue.ply".into(),
+        template: "human".into(),
+        title: "Statue".into(),
+        ..Default::default()
+    };
+    let cfg = KioskConfig {
+        assets_root: dir.to_path_buf(),
+        cache_dir: dir.join("cache"),
+        ..Default::default()
+    };
+    let l = load(dir, &cfg.cache_dir, &entry, 100_000).unwrap();
+    let lost = crate::common::cut_bones(s);
+    write_cache(
+        &cfg.cache_dir,
+        &l.cache_key,
+        &s.truth,
+        &Binding::new_without(&l.cloud, &s.truth, &lost).unwrap(),
+    );
+    let config = dir.join("kiosk.toml");
+    std::fs::write(
+        &config,
+        format!(
+            r#"assets_root = "{root}"
+cache_dir = "{cache}"
+
+[[statues]]
+file = "statue.ply"
+template = "human"
+title = "Statue"
+
+[budget]
+point_budget = 100000
+
+[render]
+background = [{r}, {g}, {b}]
+
+[window]
+width = {WIDTH}
+height = {HEIGHT}
+{extra}"#,
+            root = dir.display(),
+            cache = cfg.cache_dir.display(),
+            r = BACKGROUND[0],
+            g = BACKGROUND[1],
+            b = BACKGROUND[2],
+        ),
+    )
+    .unwrap();
+    config
+}
+
+#[test]
+fn kiosk_screenshot_shows_ghost_bones_on_a_broken_statue() {
+    use pygmalion::anatomy::Template;
     use pygmalion::synth::{Cut, SynthOptions, generate};
     use std::sync::Arc;
     if !enabled() {
@@ -224,59 +281,7 @@ fn kiosk_screenshot_shows_ghost_bones_on_a_broken_statue() {
         },
     )
     .unwrap();
-    write_ply(dir.join("broken.ply"), &s.cloud, &WriteOptions::default()).unwrap();
-    let entry = StatueEntry {
-        file: "broken.ply".into(),
-        template: "human".into(),
-        title: "Broken".into(),
-        credit: String::new(),
-        up: None,
-        ..Default::default()
-    };
-    let cfg = KioskConfig {
-        assets_root: dir.clone(),
-        cache_dir: dir.join("cache"),
-        ..Default::default()
-    };
-    let l = load(&dir, &cfg.cache_dir, &entry, 100_000).unwrap();
-    // Cached as a registration of it would be: the cut bones lost.
-    let lost = crate::common::cut_bones(&s);
-    write_cache(
-        &cfg.cache_dir,
-        &l.cache_key,
-        &s.truth,
-        &Binding::new_without(&l.cloud, &s.truth, &lost).unwrap(),
-    );
-    let config = dir.join("kiosk.toml");
-    std::fs::write(
-        &config,
-        format!(
-            r#"assets_root = "{root}"
-cache_dir = "{cache}"
-
-[[statues]]
-file = "broken.ply"
-template = "human"
-title = "Broken"
-
-[budget]
-point_budget = 100000
-
-[render]
-background = [{r}, {g}, {b}]
-
-[window]
-width = {WIDTH}
-height = {HEIGHT}
-"#,
-            root = dir.display(),
-            cache = cfg.cache_dir.display(),
-            r = BACKGROUND[0],
-            g = BACKGROUND[1],
-            b = BACKGROUND[2],
-        ),
-    )
-    .unwrap();
+    let config = fitted_synthetic_statue(&dir, &s, "");
     let shot = dir.join("shot.png");
     let (ok, log) = run_kiosk(
         &dir,
@@ -320,10 +325,6 @@ fn over_the_shoulders(img: &Image) -> f32 {
 #[test]
 fn kiosk_screenshot_keeps_the_pose_asked_for_past_the_idle_timeouts() {
     use pygmalion::anatomy::Template;
-    use pygmalion::cloud::ply::{WriteOptions, write_ply};
-    use pygmalion::kiosk::config::{KioskConfig, StatueEntry};
-    use pygmalion::kiosk::statue::{load, write_cache};
-    use pygmalion::skinning::Binding;
     use pygmalion::synth::{SynthOptions, generate};
     use std::sync::Arc;
     if !enabled() {
@@ -343,62 +344,13 @@ fn kiosk_screenshot_keeps_the_pose_asked_for_past_the_idle_timeouts() {
         },
     )
     .unwrap();
-    write_ply(dir.join("statue.ply"), &s.cloud, &WriteOptions::default()).unwrap();
-    let entry = StatueEntry {
-        file: "statue.ply".into(),
-        template: "human".into(),
-        title: "Statue".into(),
-        ..Default::default()
-    };
-    let cfg = KioskConfig {
-        assets_root: dir.clone(),
-        cache_dir: dir.join("cache"),
-        ..Default::default()
-    };
-    let l = load(&dir, &cfg.cache_dir, &entry, 100_000).unwrap();
-    write_cache(
-        &cfg.cache_dir,
-        &l.cache_key,
-        &s.truth,
-        &Binding::new(&l.cloud, &s.truth).unwrap(),
-    );
     // Idle timeouts far shorter than the run: before the fix, attract mode turned the camera
     // and changed the pose, and the reset brought the statue back to its own pose.
-    let config = dir.join("kiosk.toml");
-    std::fs::write(
-        &config,
-        format!(
-            r#"assets_root = "{root}"
-cache_dir = "{cache}"
-
-[[statues]]
-file = "statue.ply"
-template = "human"
-title = "Statue"
-
-[budget]
-point_budget = 100000
-
-[idle]
-attract_after_s = 1.0
-still_there_after_s = 2.0
-countdown_s = 1.0
-
-[render]
-background = [{r}, {g}, {b}]
-
-[window]
-width = {WIDTH}
-height = {HEIGHT}
-"#,
-            root = dir.display(),
-            cache = cfg.cache_dir.display(),
-            r = BACKGROUND[0],
-            g = BACKGROUND[1],
-            b = BACKGROUND[2],
-        ),
-    )
-    .unwrap();
+    let config = fitted_synthetic_statue(
+        &dir,
+        &s,
+        "\n[idle]\nattract_after_s = 1.0\nstill_there_after_s = 2.0\ncountdown_s = 1.0\n",
+    );
     let shoot = |name: &str, extra: &[&str]| -> Image {
         let shot = dir.join(name);
         let mut args = vec![
