@@ -19,7 +19,7 @@
 //!    **Facing check** (our choice; skipped with a facing hint or a given skeleton): the
 //!    winner is turned around ([`WorldSkeleton::turned_around`]: the same limbs with left
 //!    and right exchanged, the trunk facing the other way) and registered again on the same
-//!    points; the finalists' rule decides between the two ([`prefer`]). A human seen from
+//!    points; the finalists' rule decides between the two ([`preferred`]). A human seen from
 //!    the front or the back is nearly the same surface, so the two facings' scores are close
 //!    and a fit can settle facing backwards; facing the wrong way its knees, elbows and feet
 //!    bend outside their ranges.
@@ -456,20 +456,9 @@ pub fn register(
         let sp = span(finalists_start, level1_start, j, runs);
         finals.push(full.run(ci, &cands[ci], pause, &mut fraction, sp)?);
     }
-    // Near-ties (within 50% of the best score) are decided by anatomy (see `init`): a
-    // well-fitted figure facing the right way keeps its knees, elbows and feet in range.
-    let best_score = finals.iter().map(|f| f.score).fold(f64::INFINITY, f64::min);
-    let pick = finals
-        .iter()
-        .enumerate()
-        .filter(|(_, f)| f.score <= NEAR_TIE * best_score)
-        .min_by(|(_, a), (_, b)| {
-            a.implausible
-                .total_cmp(&b.implausible)
-                .then(a.score.total_cmp(&b.score))
-        })
-        .map(|(i, _)| i)
-        .expect("at least one finalist");
+    // Near-ties are decided by anatomy (see `init`): a well-fitted figure facing the right
+    // way keeps its knees, elbows and feet in range.
+    let pick = preferred(&finals);
     let mut best = finals.swap_remove(pick);
     let chosen = best.candidate;
     // Scale restarts of the chosen orientation (see `init`, step 7): the lowest score wins.
@@ -497,9 +486,8 @@ pub fn register(
         };
         let sp = span(finalists_start, level1_start, runs - 1, runs);
         let r = full.run(chosen, &c, pause, &mut fraction, sp)?;
-        if prefer(&r, &best) {
-            best = r;
-        }
+        let mut pair = vec![best, r];
+        best = pair.swap_remove(preferred(&pair));
     }
     let FullFit {
         world,
@@ -753,22 +741,24 @@ struct FullRun<'a> {
     lost: &'a [bool],
 }
 
-/// Whether fit `a` is preferred to fit `b` by the finalists' rule: within [`NEAR_TIE`] of the
-/// lower two-sided score, the more plausible pose wins, then the lower score.
-fn prefer(a: &FullFit, b: &FullFit) -> bool {
-    let low = a.score.min(b.score);
-    match (a.score <= NEAR_TIE * low, b.score <= NEAR_TIE * low) {
-        (true, false) => true,
-        (false, true) => false,
-        _ => a
-            .implausible
-            .total_cmp(&b.implausible)
-            .then(a.score.total_cmp(&b.score))
-            .is_lt(),
-    }
+/// The finalists' rule: among the fits within [`NEAR_TIE`] of the lowest two-sided score,
+/// the most plausible pose ([`super::init::implausibility`]), then the lowest score, then
+/// the first. Returns its index; `fits` must not be empty.
+fn preferred(fits: &[FullFit]) -> usize {
+    let best_score = fits.iter().map(|f| f.score).fold(f64::INFINITY, f64::min);
+    fits.iter()
+        .enumerate()
+        .filter(|(_, f)| f.score <= NEAR_TIE * best_score)
+        .min_by(|(_, a), (_, b)| {
+            a.implausible
+                .total_cmp(&b.implausible)
+                .then(a.score.total_cmp(&b.score))
+        })
+        .map(|(i, _)| i)
+        .expect("at least one fit")
 }
 
-/// Near-ties of two-sided scores (factor) that anatomy decides ([`prefer`]).
+/// Near-ties of two-sided scores (factor) that anatomy decides ([`preferred`]).
 const NEAR_TIE: f64 = 1.5;
 
 /// The outcome of a full level-0 registration.

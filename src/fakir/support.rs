@@ -77,7 +77,9 @@ pub fn mean_spacing(points: &[Vec3], tree: &ImmutableKdTree<f32, 3>) -> f32 {
     (sum / idx.len().max(1) as f64) as f32
 }
 
-/// The mirror bone of every bone (same position in the mirror chain).
+/// The mirror bone of every bone: the bone at the same position in the mirror chain, and for
+/// a bone of the root block the block bone from the same joint whose rest vector is reflected
+/// across the template's `x = 0` plane (the pelvis' two sides); `None` for unpaired bones.
 pub fn mirrors(t: &Template) -> Vec<Option<usize>> {
     let mut m = vec![None; t.bones.len()];
     for c in &t.chains {
@@ -86,6 +88,16 @@ pub fn mirrors(t: &Template) -> Vec<Option<usize>> {
                 m[*a] = Some(*b);
             }
         }
+    }
+    let rest_vec = |b: usize| t.joints[t.bones[b].to].rest - t.joints[t.bones[b].from].rest;
+    for i in t.block_bones() {
+        let v = rest_vec(i);
+        let reflected = Vec3::new(-v.x, v.y, v.z);
+        m[i] = t.block_bones().find(|&j| {
+            j != i
+                && t.bones[j].from == t.bones[i].from
+                && (rest_vec(j) - reflected).length() <= 1e-4 * v.length().max(1e-6)
+        });
     }
     m
 }

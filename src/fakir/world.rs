@@ -242,28 +242,13 @@ impl WorldSkeleton {
     /// and right sides change places; every bone of a mirrored pair (`mirror`, see
     /// [`crate::fakir::support::mirrors`]) takes its mirror's direction, length and radii, so
     /// the limbs stay where they lay with their labels exchanged; an unpaired bone keeps its
-    /// own. Frames as in [`WorldSkeleton::untwisted`]. The block's own bones turn with it;
-    /// their radii are exchanged with their mirror's (the block bone from the same joint whose
-    /// rest vector is reflected across the template's `x = 0` plane), as are the shared joint
-    /// radii of the limbs hanging from them.
+    /// own. Frames as in [`WorldSkeleton::untwisted`]. The block's own bones turn with it
+    /// and take their mirror's radii, as the limbs hanging from them do.
     pub fn turned_around(&self, mirror: &[Option<usize>]) -> WorldSkeleton {
-        let t = self.template.clone();
-        let mut mirror = mirror.to_vec();
-        let rest_vec = |b: usize| t.joints[t.bones[b].to].rest - t.joints[t.bones[b].from].rest;
-        for i in t.block_bones() {
-            if mirror[i].is_none() {
-                let v = rest_vec(i);
-                let reflected = Vec3::new(-v.x, v.y, v.z);
-                mirror[i] = t.block_bones().find(|&j| {
-                    t.bones[j].from == t.bones[i].from
-                        && (rest_vec(j) - reflected).length() <= 1e-4 * v.length().max(1e-6)
-                });
-            }
-        }
         let up = self.root_rotation * Vec3::Y;
         let root =
             (Quat::from_axis_angle(up, std::f32::consts::PI) * self.root_rotation).normalize();
-        self.rebuilt(root, &mirror)
+        self.rebuilt(root, mirror)
     }
 
     /// The same bones without twist: each free bone's frame is its rest frame relative to its
