@@ -9,12 +9,16 @@
 //! the same work. Build with `--release`; the figures are whole-machine wall time (all cores
 //! used by rayon unless the name ends in `_1t`, which runs on a one-thread pool).
 //!
+//! The GPU benchmarks (`render/…`, see [`render`]) run only when `--only` names them: they need
+//! a GPU and take minutes on a software renderer.
+//!
 //! With `--json`, one JSON object per line: `name`, `n` (problem size), `runs`, `median_s`,
 //! `min_s`, `max_s`, plus benchmark-specific figures in `extra`.
 
 mod core;
 mod fakir;
 mod kiosk;
+pub mod render;
 mod restore;
 mod skin;
 
@@ -55,6 +59,11 @@ pub fn entries() -> Vec<Entry> {
     e
 }
 
+/// The benchmarks that need a GPU (run only when `--only` names them).
+pub fn gpu_entries() -> Vec<Entry> {
+    render::entries()
+}
+
 /// Times `body` once for warm-up and then `runs` times; `n` is the problem size.
 pub fn time_it(name: &str, n: u64, runs: usize, mut body: impl FnMut()) -> BenchResult {
     body();
@@ -66,7 +75,13 @@ pub fn time_it(name: &str, n: u64, runs: usize, mut body: impl FnMut()) -> Bench
             t.elapsed().as_secs_f64()
         })
         .collect();
+    summarise(name, n, &mut times)
+}
+
+/// Minimum, median and maximum of measured seconds (`times` is sorted in place; not empty).
+pub fn summarise(name: &str, n: u64, times: &mut [f64]) -> BenchResult {
     times.sort_by(f64::total_cmp);
+    let runs = times.len();
     let median = if runs % 2 == 1 {
         times[runs / 2]
     } else {
@@ -90,7 +105,12 @@ pub fn run(
     mut report: impl FnMut(&BenchResult),
 ) -> Result<Vec<BenchResult>> {
     let mut out = Vec::new();
-    for e in entries() {
+    let gpu = only.map(|p| {
+        gpu_entries()
+            .into_iter()
+            .filter(move |e| e.name.starts_with(p))
+    });
+    for e in entries().into_iter().chain(gpu.into_iter().flatten()) {
         if only.is_some_and(|p| !e.name.starts_with(p)) {
             continue;
         }
@@ -139,6 +159,7 @@ pub fn run_cli(json: bool, only: Option<&str>, runs: usize) -> Result<()> {
             only.unwrap_or(""),
             entries()
                 .iter()
+                .chain(&gpu_entries())
                 .map(|e| e.name)
                 .collect::<Vec<_>>()
                 .join(", ")

@@ -4,10 +4,12 @@
 //! ## Splats
 //!
 //! Each statue with [`SkinnedPoints`] gets a child **points** entity ([`SplatPoints`] on the
-//! statue names it): one [`Mesh`] of 4 vertices per point, all four carrying the point's centre
-//! (`POSITION`), normal (`NORMAL`) and colour ([`ATTRIBUTE_SPLAT_COLOR`], 4 bytes), and a
-//! `UV_0` corner in `{±1}²` that tells them apart; two triangles per point. The
-//! [`SplatMaterial`]'s vertex shader (`render/splat.wgsl`) moves each corner by `±r` along two
+//! statue names it): one static [`Mesh`] of 4 vertices per point, each carrying only
+//! `4 · point + corner` ([`ATTRIBUTE_SPLAT_INDEX`]) and the point's colour
+//! ([`ATTRIBUTE_SPLAT_COLOR`], 4 bytes); two triangles per point. The points' centres and
+//! normals live in a storage buffer of the [`SplatMaterial`] (24 bytes a point,
+//! [`pack_points`]). Its vertex shader (`render/splat.wgsl`) reads the point's centre and
+//! normal there, the corner in `{±1}²` from [`CORNERS`], and (`render/splat.wgsl`) moves each corner by `±r` along two
 //! axes of the plane orthogonal to the normal, so the quad lies in the point's tangent plane
 //! (depth follows the surface, splats of one surface overlap without z-fighting staircases);
 //! when the normal is seen nearly edge-on (`|n·v|` below 0.3) the quad turns smoothly to face
@@ -25,11 +27,15 @@
 //! shader keeps at least [`MIN_SPLAT_PIXELS`] on screen, so a far statue stays a closed
 //! surface.
 //!
-//! **Updates.** When [`SkinnedPoints::version`] changes, the mesh's position and normal vectors
-//! are overwritten in place (`Assets::get_mut` → `Mesh::attribute_mut`; no allocation), which
-//! re-uploads the vertex buffer. The mesh has [`NoFrustumCulling`] since its bounds move with the
-//! pose. At most `budget.point_budget` points are drawn (the loader already subsamples; a larger
-//! buffer is strided).
+//! **Updates.** When [`SkinnedPoints::version`] changes, the drawn points are packed into the
+//! statue's staging bytes (in place, in parallel: no allocation) and written straight into the
+//! storage buffer (`RenderQueue::write_buffer`); the mesh is untouched. An earlier version kept
+//! centres and normals as mesh attributes, four copies per point, and rewrote the mesh: Bevy
+//! then cloned, interleaved and re-uploaded 144 MB for a million points, 236 ms a frame on an
+//! H200 machine (4 frames a second while a statue moved, against 112 standing still). The mesh
+//! has [`NoFrustumCulling`] since its bounds move with the pose. At most `budget.point_budget`
+//! points are drawn (the loader already subsamples; a larger buffer is strided), and no more
+//! than the device's largest storage binding holds.
 //!
 //! ## Bones
 //!
@@ -72,10 +78,10 @@ use bevy::mesh::{
 use bevy::pbr::{MaterialPipeline, MaterialPipelineKey};
 use bevy::prelude::*;
 use bevy::render::render_resource::{
-    AsBindGroup, CompareFunction, RenderPipelineDescriptor, ShaderType,
-    SpecializedMeshPipelineError, TextureFormat, VertexFormat,
+    AsBindGroup, Buffer, BufferDescriptor, BufferUsages, CompareFunction, RenderPipelineDescriptor,
+    ShaderType, SpecializedMeshPipelineError, TextureFormat, VertexFormat,
 };
-use bevy::render::renderer::RenderAdapterInfo;
+use bevy::render::renderer::{RenderAdapterInfo, RenderDevice, RenderQueue};
 use bevy::shader::{Shader, ShaderRef};
 use bevy::ui::IsDefaultUiCamera;
 use rayon::prelude::*;
@@ -84,6 +90,11 @@ use rayon::prelude::*;
 pub const SPLAT_SHADER: Handle<Shader> = uuid_handle!("19bab7d5-fd7d-4e21-84ff-7fbcdc66c433");
 /// The bone shader (embedded).
 pub const BONE_SHADER: Handle<Shader> = uuid_handle!("cfdb4dfd-0f10-4843-b4ab-51b495596039");
+
+/// Per-vertex index of a splat corner: `4 · point + corner` (the point in the storage buffer,
+/// the corner in [`CORNERS`]).
+pub const ATTRIBUTE_SPLAT_INDEX: MeshVertexAttribute =
+    MeshVertexAttribute::new("SplatIndex", 0x7079_676d_5350_4958, VertexFormat::Uint32);
 
 /// Per-vertex sRGB colour of a splat (4 bytes; alpha unused).
 pub const ATTRIBUTE_SPLAT_COLOR: MeshVertexAttribute =
@@ -179,11 +190,15 @@ pub struct SplatParams {
     pub edges: f32,
 }
 
-/// The splat material: oriented discs from a 4-vertices-per-point mesh.
+/// The splat material: oriented discs from a 4-vertices-per-point mesh whose centres and
+/// normals are read from a storage buffer.
 #[derive(Asset, TypePath, AsBindGroup, Clone, Debug)]
 pub struct SplatMaterial {
     #[uniform(0)]
     pub params: SplatParams,
+    /// The drawn points, [`SPLAT_POINT_BYTES`] each (see [`pack_points`]).
+    #[storage(1, read_only, buffer)]
+    pub points: Buffer,
 }
 
 impl Material for SplatMaterial {
@@ -206,10 +221,8 @@ impl Material for SplatMaterial {
         _key: MaterialPipelineKey<Self>,
     ) -> Result<(), SpecializedMeshPipelineError> {
         let vertex_layout = layout.0.get_layout(&[
-            Mesh::ATTRIBUTE_POSITION.at_shader_location(0),
-            Mesh::ATTRIBUTE_NORMAL.at_shader_location(1),
-            Mesh::ATTRIBUTE_UV_0.at_shader_location(2),
-            ATTRIBUTE_SPLAT_COLOR.at_shader_location(3),
+            ATTRIBUTE_SPLAT_INDEX.at_shader_location(0),
+            ATTRIBUTE_SPLAT_COLOR.at_shader_location(1),
         ])?;
         descriptor.vertex.buffers = vec![vertex_layout];
         // The quads are built facing either way.
@@ -282,6 +295,10 @@ pub struct SplatPoints {
     pub count: usize,
     /// World splat radius.
     pub radius: f32,
+    /// The drawn points on the GPU (the material's storage buffer).
+    pub buffer: Buffer,
+    /// Their bytes as last packed, reused for every pose (no allocation per frame).
+    pub staging: Vec<u8>,
 }
 
 /// On a statue: its bone entities.
@@ -419,18 +436,21 @@ pub fn budget_indices(n: usize, budget: usize) -> Option<Vec<u32>> {
 /// The corners of a splat quad, in order (two triangles 0-1-2, 0-2-3).
 pub const CORNERS: [[f32; 2]; 4] = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]];
 
-/// Builds the splat mesh of `points` (the `keep` subset when given).
+/// Bytes of one point in the splats' storage buffer: centre and normal, 6 × `f32`.
+pub const SPLAT_POINT_BYTES: usize = 24;
+
+/// Builds the static splat mesh for `points` (the `keep` subset when given): four vertices per
+/// drawn point `i`, each carrying `ATTRIBUTE_SPLAT_INDEX = 4·i + corner` (the corner indexes
+/// [`CORNERS`]) and the point's colour, and two triangles per point. Positions and normals are
+/// not in the mesh: the vertex shader reads them from the storage buffer [`pack_points`] fills,
+/// so a new pose uploads 24 bytes per point and the mesh never changes.
 pub fn splat_mesh(points: &SkinnedPoints, keep: Option<&[u32]>) -> Mesh {
     let n = keep.map_or(points.positions.len(), |k| k.len());
     let mut mesh = Mesh::new(
         PrimitiveTopology::TriangleList,
-        RenderAssetUsages::default(),
+        RenderAssetUsages::RENDER_WORLD,
     );
-    let mut positions = vec![[0.0f32; 3]; 4 * n];
-    let mut normals = vec![[0.0f32; 3]; 4 * n];
-    fill_quads(&mut positions, &points.positions, keep);
-    fill_quads(&mut normals, &points.normals, keep);
-    let corners: Vec<[f32; 2]> = (0..n).flat_map(|_| CORNERS).collect();
+    let index: Vec<u32> = (0..4 * n as u32).collect();
     let colors: Vec<[u8; 4]> = match &points.colors {
         Some(c) if c.len() == points.positions.len() => (0..n)
             .flat_map(|i| {
@@ -446,9 +466,7 @@ pub fn splat_mesh(points: &SkinnedPoints, keep: Option<&[u32]>) -> Mesh {
         let b = 4 * i;
         indices.extend_from_slice(&[b, b + 1, b + 2, b, b + 2, b + 3]);
     }
-    mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
-    mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, normals);
-    mesh.insert_attribute(Mesh::ATTRIBUTE_UV_0, corners);
+    mesh.insert_attribute(ATTRIBUTE_SPLAT_INDEX, index);
     mesh.insert_attribute(
         ATTRIBUTE_SPLAT_COLOR,
         VertexAttributeValues::Unorm8x4(colors),
@@ -457,21 +475,30 @@ pub fn splat_mesh(points: &SkinnedPoints, keep: Option<&[u32]>) -> Mesh {
     mesh
 }
 
-/// Writes each source vector four times (one per quad corner) into `dst`, in place.
-fn fill_quads(dst: &mut [[f32; 3]], src: &[Vec3], keep: Option<&[u32]>) {
-    const QUADS: usize = 1024;
-    dst.par_chunks_mut(4 * QUADS)
-        .enumerate()
-        .for_each(|(c, chunk)| write_quads(chunk, src, keep, c * QUADS));
-}
-
-fn write_quads(chunk: &mut [[f32; 3]], src: &[Vec3], keep: Option<&[u32]>, first: usize) {
-    for (q, quad) in chunk.chunks_exact_mut(4).enumerate() {
-        let i = first + q;
-        let j = keep.map_or(i, |k| k[i] as usize);
-        let v = src.get(j).copied().unwrap_or(Vec3::ZERO).to_array();
-        quad.fill(v);
+/// Writes the drawn points' centres and normals (the `keep` subset when given) into `dst`, in
+/// place, as the splats' storage buffer holds them: per point `x y z nx ny nz`, little-endian
+/// `f32` ([`SPLAT_POINT_BYTES`]). False, with nothing written, when `dst` does not have the
+/// size of that many points or the normals do not match the positions.
+pub fn pack_points(dst: &mut [u8], points: &SkinnedPoints, keep: Option<&[u32]>) -> bool {
+    const CHUNK: usize = 4096;
+    let n = keep.map_or(points.positions.len(), |k| k.len());
+    if dst.len() != SPLAT_POINT_BYTES * n || points.normals.len() != points.positions.len() {
+        return false;
     }
+    dst.par_chunks_mut(SPLAT_POINT_BYTES * CHUNK)
+        .enumerate()
+        .for_each(|(c, chunk)| {
+            for (q, out) in chunk.chunks_exact_mut(SPLAT_POINT_BYTES).enumerate() {
+                let i = c * CHUNK + q;
+                let j = keep.map_or(i, |k| k[i] as usize);
+                let p = points.positions.get(j).copied().unwrap_or(Vec3::ZERO);
+                let m = points.normals.get(j).copied().unwrap_or(Vec3::ZERO);
+                for (k, v) in [p.x, p.y, p.z, m.x, m.y, m.z].into_iter().enumerate() {
+                    out[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
+                }
+            }
+        });
+    true
 }
 
 /// The world splat radius for a set of points.
@@ -490,16 +517,25 @@ pub fn splat_radius(positions: &[Vec3], point_scale: f32) -> f32 {
     }
 }
 
+#[allow(clippy::type_complexity)]
 fn attach_points(
     mut commands: Commands,
     statues: Query<(Entity, &SkinnedPoints), Without<SplatPoints>>,
     settings: Res<Settings>,
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<SplatMaterial>>,
 ) {
     let cfg = &settings.0;
+    // The storage buffer must fit the device's largest storage binding.
+    let fits = device.limits().max_storage_buffer_binding_size as usize / SPLAT_POINT_BYTES;
     for (statue, points) in &statues {
-        let keep = budget_indices(points.positions.len(), cfg.budget.point_budget);
+        let budget = match cfg.budget.point_budget {
+            0 => fits,
+            b => b.min(fits),
+        };
+        let keep = budget_indices(points.positions.len(), budget);
         let count = keep.as_ref().map_or(points.positions.len(), |k| k.len());
         let radius = match &keep {
             Some(k) => {
@@ -508,6 +544,20 @@ fn attach_points(
             }
             None => splat_radius(&points.positions, cfg.render.point_scale),
         };
+        let mut staging = vec![0u8; SPLAT_POINT_BYTES * count];
+        if !pack_points(&mut staging, points, keep.as_deref()) {
+            warn!("the statue's normals do not match its points: not drawn");
+            continue;
+        }
+        let buffer = device.create_buffer(&BufferDescriptor {
+            label: Some("pygmalion splat points"),
+            size: staging.len().max(SPLAT_POINT_BYTES) as u64,
+            usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        if !staging.is_empty() {
+            queue.write_buffer(&buffer, 0, &staging);
+        }
         let mesh = meshes.add(splat_mesh(points, keep.as_deref()));
         let base = if points.colors.is_some() {
             Vec3::ONE
@@ -523,6 +573,7 @@ fn attach_points(
                 edge_on: 0.3,
                 edges: if cfg.render.edl { 1.0 } else { 0.0 },
             },
+            points: buffer.clone(),
         });
         let child = commands
             .spawn((
@@ -542,49 +593,33 @@ fn attach_points(
             keep,
             count,
             radius,
+            buffer,
+            staging,
         });
         info!("drawing {count} points as splats of radius {radius:.4}");
     }
 }
 
-/// Overwrites the mesh's positions and normals with `points` (the `keep` subset when given), in
-/// place: no allocation. False when the mesh does not have the matching layout (then nothing
-/// sensible was written and the mesh should be rebuilt with [`splat_mesh`]).
-pub fn write_points(mesh: &mut Mesh, points: &SkinnedPoints, keep: Option<&[u32]>) -> bool {
-    let n = keep.map_or(points.positions.len(), |k| k.len());
-    if points.normals.len() != points.positions.len() {
-        return false;
-    }
-    for (attribute, src) in [
-        (Mesh::ATTRIBUTE_POSITION, &points.positions),
-        (Mesh::ATTRIBUTE_NORMAL, &points.normals),
-    ] {
-        match mesh.attribute_mut(attribute) {
-            Some(VertexAttributeValues::Float32x3(v)) if v.len() == 4 * n => {
-                fill_quads(v, src, keep)
-            }
-            _ => return false,
-        }
-    }
-    true
-}
-
+/// A new pose: the drawn points are packed into the statue's staging bytes (no allocation)
+/// and written to its storage buffer, which the GPU reads from its next frame on.
 fn update_points(
-    mut statues: Query<(&SkinnedPoints, &mut SplatPoints)>,
-    mut meshes: ResMut<Assets<Mesh>>,
+    mut commands: Commands,
+    mut statues: Query<(Entity, &SkinnedPoints, &mut SplatPoints)>,
+    queue: Res<RenderQueue>,
 ) {
-    for (points, mut splats) in &mut statues {
+    for (statue, points, mut splats) in &mut statues {
         if splats.version == points.version {
             continue;
         }
-        let Some(mut mesh) = meshes.get_mut(&splats.mesh) else {
+        let splats = &mut *splats;
+        if !pack_points(&mut splats.staging, points, splats.keep.as_deref()) {
+            // The points changed in number: draw them afresh.
+            commands.entity(splats.entity).despawn();
+            commands.entity(statue).remove::<SplatPoints>();
             continue;
-        };
-        let keep = splats.keep.as_deref();
-        if !write_points(&mut mesh, points, keep) {
-            // The buffer changed size: rebuild the mesh.
-            *mesh = splat_mesh(points, keep);
-            splats.count = keep.map_or(points.positions.len(), |k| k.len());
+        }
+        if !splats.staging.is_empty() {
+            queue.write_buffer(&splats.buffer, 0, &splats.staging);
         }
         splats.version = points.version;
     }

@@ -1,7 +1,9 @@
 // Oriented point splats (Pygmalion kiosk).
 //
-// Every point of the statue is four vertices that share its centre and normal; only the
-// `corner` attribute (±1, ±1) tells them apart. The vertex shader spreads the corners over a
+// Every point of the statue is four vertices; their `index` attribute is 4 · point + corner.
+// The point's centre and normal are read from the storage buffer `points` (6 floats per
+// point, rewritten when the statue is re-posed; the mesh itself never changes), the corner
+// (±1, ±1) from `CORNERS`. The vertex shader spreads the corners over a
 // square of half-side `r` in the plane orthogonal to the point's normal (turned towards the
 // camera when the normal is seen nearly edge-on), and the fragment shader keeps the inscribed
 // disc and shades it: two-sided soft Lambert with a key light fixed in view space (the statue
@@ -27,13 +29,13 @@ struct SplatParams {
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(0) var<uniform> params: SplatParams;
+// Per point: x y z nx ny nz.
+@group(#{MATERIAL_BIND_GROUP}) @binding(1) var<storage, read> points: array<f32>;
 
 struct SplatVertex {
     @builtin(instance_index) instance_index: u32,
-    @location(0) center: vec3<f32>,
-    @location(1) normal: vec3<f32>,
-    @location(2) corner: vec2<f32>,
-    @location(3) color: vec4<f32>,
+    @location(0) index: u32,
+    @location(1) color: vec4<f32>,
 }
 
 struct SplatVarying {
@@ -52,8 +54,14 @@ fn srgb_to_linear(c: vec3<f32>) -> vec3<f32> {
 
 @vertex
 fn vertex(v: SplatVertex) -> SplatVarying {
+    let i = 6u * (v.index >> 2u);
+    let c = v.index & 3u;
+    // CORNERS: (-1, -1), (1, -1), (1, 1), (-1, 1).
+    let corner = vec2<f32>(select(-1.0, 1.0, c == 1u || c == 2u), select(-1.0, 1.0, c >= 2u));
+    let local_center = vec3<f32>(points[i], points[i + 1u], points[i + 2u]);
+    let local_normal = vec3<f32>(points[i + 3u], points[i + 4u], points[i + 5u]);
     let world_from_local = mesh_functions::get_world_from_local(v.instance_index);
-    let center = (world_from_local * vec4<f32>(v.center, 1.0)).xyz;
+    let center = (world_from_local * vec4<f32>(local_center, 1.0)).xyz;
 
     // Direction to the eye (orthographic views look along the view's -Z).
     var to_eye = view.world_position - center;
@@ -62,7 +70,7 @@ fn vertex(v: SplatVertex) -> SplatVarying {
     }
     to_eye = normalize(to_eye);
 
-    var n = mesh_functions::mesh_normal_local_to_world(v.normal, v.instance_index);
+    var n = mesh_functions::mesh_normal_local_to_world(local_normal, v.instance_index);
     let n_len = length(n);
     if n_len < 1e-6 || n_len != n_len {
         n = to_eye;
@@ -85,11 +93,11 @@ fn vertex(v: SplatVertex) -> SplatVarying {
     let px_per_unit = view.clip_from_view[1][1] * 0.5 * view.viewport.w / max(abs(clip_center.w), 1e-6);
     let r = max(params.radius, params.min_pixels / max(px_per_unit, 1e-6));
 
-    let p = center + (t1 * v.corner.x + t2 * v.corner.y) * r;
+    let p = center + (t1 * corner.x + t2 * corner.y) * r;
 
     var out: SplatVarying;
     out.clip_position = view.clip_from_world * vec4<f32>(p, 1.0);
-    out.corner = v.corner;
+    out.corner = corner;
     out.albedo = params.base_color.rgb * v.color.rgb;
     out.normal = front;
     out.facing = a;
