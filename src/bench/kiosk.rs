@@ -2,12 +2,14 @@
 //! (`MinimalPlugins` + the kiosk's plugins without rendering) holds a 500k-point synthetic
 //! statue, ready (fitted and bound), and animates it to the `greeting` pose; each timed body is
 //! one `app.update()` — every kiosk system of the frame, skinning included (baseline).
-//! `extra.skin_ms` is the skinning system's share (last frame).
+//! `extra.skin_ms` is the skinning system's share (last frame). `kiosk/splat_pack_500k` times
+//! what the renderer adds on the CPU when the points move: packing them for the GPU.
 
 use super::{BenchResult, Entry, time_it};
 use crate::error::Result;
 use crate::kiosk::animate::SkinWork;
 use crate::kiosk::config::KioskConfig;
+use crate::kiosk::render::{SPLAT_POINT_BYTES, pack_points};
 use crate::kiosk::{
     ActiveStatue, CurrentPose, FittedSkeleton, KioskPlugin, PoseRequested, SkinnedPoints, Statue,
     StatueBinding, StatueCloud, StatueState,
@@ -17,10 +19,45 @@ use bevy::prelude::*;
 use std::sync::Arc;
 
 pub(super) fn entries() -> Vec<Entry> {
-    vec![Entry {
-        name: "kiosk/animate_500k",
-        run: animate_500k,
-    }]
+    vec![
+        Entry {
+            name: "kiosk/animate_500k",
+            run: animate_500k,
+        },
+        Entry {
+            name: "kiosk/splat_pack_500k",
+            run: splat_pack_500k,
+        },
+    ]
+}
+
+/// The renderer's CPU share of a moving frame: packing 500k skinned points (centre and normal)
+/// into the splats' staging bytes ([`pack_points`]), which are then handed to the GPU queue.
+fn splat_pack_500k(runs: usize) -> Result<BenchResult> {
+    let (cloud, _) = super::skin::statue(500_000)?;
+    let points = SkinnedPoints {
+        normals: cloud.normals.clone().unwrap_or_default(),
+        positions: cloud.positions,
+        colors: None,
+        version: 1,
+        scratch: Scratch::default(),
+    };
+    let mut staging = vec![0u8; SPLAT_POINT_BYTES * points.positions.len()];
+    let mut ok = true;
+    let r = time_it(
+        "kiosk/splat_pack_500k",
+        points.positions.len() as u64,
+        runs,
+        || {
+            ok &= pack_points(&mut staging, &points, None);
+        },
+    );
+    if !ok {
+        return Err(crate::Error::input(
+            "kiosk/splat_pack_500k: the points were not packed",
+        ));
+    }
+    Ok(r)
 }
 
 fn animate_500k(runs: usize) -> Result<BenchResult> {
