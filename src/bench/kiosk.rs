@@ -6,6 +6,8 @@
 //! what the renderer adds on the CPU when the points move: packing them for the GPU.
 
 use super::{BenchResult, Entry, time_it};
+use crate::anatomy::Skeleton;
+use crate::cloud::PointCloud;
 use crate::error::Result;
 use crate::kiosk::animate::SkinWork;
 use crate::kiosk::config::KioskConfig;
@@ -60,22 +62,13 @@ fn splat_pack_500k(runs: usize) -> Result<BenchResult> {
     Ok(r)
 }
 
-fn animate_500k(runs: usize) -> Result<BenchResult> {
-    let (cloud, skel) = super::skin::statue(500_000)?;
-    let binding = Arc::new(Binding::new(&cloud, &skel)?);
-    let mut config = KioskConfig::default();
-    // A long pose change, so every timed frame animates and re-skins.
-    config.skinning.pose_seconds = 1.0e6;
-    let mut app = App::new();
-    app.add_plugins((
-        MinimalPlugins,
-        bevy::input::InputPlugin,
-        KioskPlugin {
-            config,
-            headless: true,
-        },
-    ));
-    let cloud = Arc::new(cloud);
+/// Spawns `cloud` as the kiosk's active statue, ready: fitted to `skel`, bound, at rest.
+pub(super) fn ready_statue(
+    app: &mut App,
+    cloud: &Arc<PointCloud>,
+    skel: &Skeleton,
+    binding: Arc<Binding>,
+) -> Entity {
     let e = app
         .world_mut()
         .spawn((
@@ -100,6 +93,26 @@ fn animate_500k(runs: usize) -> Result<BenchResult> {
         ))
         .id();
     app.world_mut().resource_mut::<ActiveStatue>().entity = Some(e);
+    e
+}
+
+fn animate_500k(runs: usize) -> Result<BenchResult> {
+    let (cloud, skel) = super::skin::statue(500_000)?;
+    let binding = Arc::new(Binding::new(&cloud, &skel)?);
+    let mut config = KioskConfig::default();
+    // A long pose change, so every timed frame animates and re-skins.
+    config.skinning.pose_seconds = 1.0e6;
+    let mut app = App::new();
+    app.add_plugins((
+        MinimalPlugins,
+        bevy::input::InputPlugin,
+        KioskPlugin {
+            config,
+            headless: true,
+        },
+    ));
+    let cloud = Arc::new(cloud);
+    ready_statue(&mut app, &cloud, &skel, binding);
     app.update();
     app.world_mut()
         .write_message(PoseRequested("greeting".into()));

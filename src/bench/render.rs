@@ -35,11 +35,8 @@ use crate::kiosk::animate::SkinWork;
 use crate::kiosk::config::KioskConfig;
 use crate::kiosk::render::{KioskCamera, SplatPoints, capture_rgb};
 use crate::kiosk::statue::frame_camera;
-use crate::kiosk::{
-    ActiveStatue, CurrentPose, FittedSkeleton, KioskPlugin, OrbitCamera, PoseRequested,
-    SceneMargins, SkinnedPoints, Statue, StatueBinding, StatueCloud, StatueState,
-};
-use crate::skinning::{Binding, Scratch};
+use crate::kiosk::{KioskPlugin, OrbitCamera, PoseRequested, SceneMargins};
+use crate::skinning::Binding;
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::RenderTarget;
 use bevy::log::LogPlugin;
@@ -146,30 +143,7 @@ pub fn frames(name: &str, points: usize, runs: usize, animate: bool) -> Result<B
     };
 
     let cloud = Arc::new(cloud);
-    let e = app
-        .world_mut()
-        .spawn((
-            Statue {
-                index: 0,
-                title: "bench".into(),
-            },
-            StatueState::Ready,
-            StatueCloud(cloud.clone()),
-            FittedSkeleton(skel.clone()),
-            CurrentPose(skel.clone()),
-            StatueBinding(binding),
-            SkinnedPoints {
-                positions: cloud.positions.clone(),
-                normals: cloud.normals.clone().unwrap_or_default(),
-                colors: None,
-                version: 1,
-                scratch: Scratch::default(),
-            },
-            Transform::default(),
-            Visibility::default(),
-        ))
-        .id();
-    app.world_mut().resource_mut::<ActiveStatue>().entity = Some(e);
+    super::kiosk::ready_statue(&mut app, &cloud, &skel, binding);
     {
         let margins = *app.world().resource::<SceneMargins>();
         let mut orbit = app.world_mut().resource_mut::<OrbitCamera>();
