@@ -343,6 +343,73 @@ fn the_gpu_frame_bench_draws_the_statue_while_it_moves() {
     assert!(r.extra["skin_ms"] > 0.0, "not re-skinned");
 }
 
+/// A restoration shown or undone changes the number of the statue's points on the same entity:
+/// the splats are rebuilt there (buffer, mesh and material) and the statue stays drawn.
+#[test]
+fn the_splats_follow_a_statue_whose_points_change_in_number() {
+    use pygmalion::anatomy::Template;
+    use pygmalion::bench::render::{Offscreen, statue_fraction};
+    use pygmalion::kiosk::SkinnedPoints;
+    use pygmalion::kiosk::config::KioskConfig;
+    use pygmalion::kiosk::render::{SPLAT_POINT_BYTES, SplatPoints};
+    use pygmalion::skinning::Binding;
+    use pygmalion::synth::{SynthOptions, generate};
+    use std::sync::Arc;
+    if !enabled() {
+        println!("skipped: needs Vulkan (PYGMALION_RENDER_TESTS=1)");
+        return;
+    }
+    let t = Arc::new(Template::builtin("human").unwrap());
+    let s = generate(
+        t,
+        &SynthOptions {
+            points: 20_000,
+            seed: 42,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let binding = Arc::new(Binding::new(&s.cloud, &s.truth).unwrap());
+    let cloud = Arc::new(s.cloud);
+    let mut config = KioskConfig::default();
+    config.idle.attract_after_s = f32::INFINITY;
+    config.idle.still_there_after_s = f32::INFINITY;
+    let name = "test/splats_renumbered";
+    let mut view = Offscreen::new(name, config, &cloud, &s.truth, binding).unwrap();
+    assert_eq!(view.until_drawn(name).unwrap(), 20_000);
+    let before = statue_fraction(&mut view, name).unwrap();
+    let splats = |view: &mut Offscreen| {
+        let world = view.app.world_mut();
+        let p = world.query::<&SplatPoints>().single(world).unwrap();
+        (p.entity, p.count, p.staging.len())
+    };
+    let (child, _, _) = splats(&mut view);
+    // Every other point, as a hypothesis of another size would leave them.
+    {
+        let world = view.app.world_mut();
+        let mut p = world
+            .query::<&mut SkinnedPoints>()
+            .single_mut(world)
+            .unwrap();
+        let half: Vec<usize> = (0..p.positions.len()).step_by(2).collect();
+        p.positions = half.iter().map(|&i| p.positions[i]).collect();
+        p.normals = half.iter().map(|&i| p.normals[i]).collect();
+        p.version += 1;
+    }
+    view.frame();
+    let (entity, count, bytes) = splats(&mut view);
+    assert_eq!(entity, child, "the points entity was replaced");
+    assert_eq!((count, bytes), (10_000, 10_000 * SPLAT_POINT_BYTES));
+    // Half the points, splats larger by √2: the statue covers about as much of the picture.
+    let after = statue_fraction(&mut view, name).unwrap();
+    println!("statue fraction {before:.4} with 20k points, {after:.4} with 10k");
+    assert!(before > 0.03, "statue fraction {before}");
+    assert!(
+        (0.8..1.25).contains(&(after / before)),
+        "statue fraction {before} -> {after}"
+    );
+}
+
 #[test]
 fn kiosk_screenshot_keeps_the_pose_asked_for_past_the_idle_timeouts() {
     use pygmalion::anatomy::Template;

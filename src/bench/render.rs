@@ -30,6 +30,8 @@
 //! `pygmalion bench` leaves them out unless `--only` names them (`--only render/`).
 
 use super::{BenchResult, Entry};
+use crate::anatomy::Skeleton;
+use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
 use crate::kiosk::animate::SkinWork;
 use crate::kiosk::config::KioskConfig;
@@ -73,109 +75,115 @@ pub(super) fn entries() -> Vec<Entry> {
     ]
 }
 
-/// Times `runs` frames of the kiosk drawing a synthetic statue of `points` points off-screen,
-/// animating it when `animate` (see the module docs); `name` labels the result and the errors.
-pub fn frames(name: &str, points: usize, runs: usize, animate: bool) -> Result<BenchResult> {
-    let (cloud, skel) = super::skin::statue(points)?;
-    let binding = Arc::new(Binding::new(&cloud, &skel)?);
-    let mut config = KioskConfig::default();
-    config.budget.point_budget = cloud.len();
-    config.window.width = SIZE.0;
-    config.window.height = SIZE.1;
-    config.skinning.pose_seconds = 1.0e6;
-    config.idle.attract_after_s = f32::INFINITY;
-    config.idle.still_there_after_s = f32::INFINITY;
+/// The kiosk's plugins with Bevy's renderer and no window, drawing into an off-screen image of
+/// [`SIZE`], pumped by hand (Bevy's `externally_driven_headless_renderer` pattern); the
+/// benchmarks' harness, and the tests'.
+pub struct Offscreen {
+    pub app: App,
+    /// The image the kiosk's camera draws into.
+    pub target: Handle<Image>,
+}
 
-    // Bevy's log plugin sets a global logger: only the first app of the process may add it.
-    static LOGGING: AtomicBool = AtomicBool::new(false);
-    let mut plugins = DefaultPlugins.build();
-    if LOGGING.swap(true, Ordering::SeqCst) {
-        plugins = plugins.disable::<LogPlugin>();
-    }
-    let mut app = App::new();
-    app.add_plugins(
-        plugins
-            .set(WindowPlugin {
-                primary_window: None,
-                exit_condition: ExitCondition::DontExit,
-                ..default()
-            })
-            .set(RenderPlugin {
-                synchronous_pipeline_compilation: true,
-                ..default()
-            })
-            .disable::<WinitPlugin>(),
-    )
-    .add_plugins(KioskPlugin {
-        config,
-        headless: false,
-    });
-    // Pumped by hand: `App::run` would have finished the plugins.
-    app.finish();
-    app.cleanup();
-    if !app.world().contains_resource::<RenderDevice>() {
-        return Err(Error::input(format!(
-            "{name}: no GPU adapter (a Vulkan driver or Mesa's software Vulkan is needed)"
-        )));
-    }
-    if let Some(info) = app.world().get_resource::<RenderAdapterInfo>() {
-        eprintln!(
-            "{name}: adapter {} ({:?}, {:?}), {}×{} off-screen",
-            info.name, info.device_type, info.backend, SIZE.0, SIZE.1
-        );
+impl Offscreen {
+    /// A kiosk configured by `config` (its window size is replaced by [`SIZE`]) showing `cloud`,
+    /// fitted to `skel` and bound, framed as the kiosk frames a statue; one frame has run.
+    /// Errors (labelled `name`): no GPU adapter, no camera.
+    pub fn new(
+        name: &str,
+        mut config: KioskConfig,
+        cloud: &Arc<PointCloud>,
+        skel: &Skeleton,
+        binding: Arc<Binding>,
+    ) -> Result<Offscreen> {
+        config.window.width = SIZE.0;
+        config.window.height = SIZE.1;
+        // Bevy's log plugin sets a global logger: only the first app of the process may add it.
+        static LOGGING: AtomicBool = AtomicBool::new(false);
+        let mut plugins = DefaultPlugins.build();
+        if LOGGING.swap(true, Ordering::SeqCst) {
+            plugins = plugins.disable::<LogPlugin>();
+        }
+        let mut app = App::new();
+        app.add_plugins(
+            plugins
+                .set(WindowPlugin {
+                    primary_window: None,
+                    exit_condition: ExitCondition::DontExit,
+                    ..default()
+                })
+                .set(RenderPlugin {
+                    synchronous_pipeline_compilation: true,
+                    ..default()
+                })
+                .disable::<WinitPlugin>(),
+        )
+        .add_plugins(KioskPlugin {
+            config,
+            headless: false,
+        });
+        // Pumped by hand: `App::run` would have finished the plugins.
+        app.finish();
+        app.cleanup();
+        if !app.world().contains_resource::<RenderDevice>() {
+            return Err(Error::input(format!(
+                "{name}: no GPU adapter (a Vulkan driver or Mesa's software Vulkan is needed)"
+            )));
+        }
+        if let Some(info) = app.world().get_resource::<RenderAdapterInfo>() {
+            eprintln!(
+                "{name}: adapter {} ({:?}, {:?}), {}×{} off-screen",
+                info.name, info.device_type, info.backend, SIZE.0, SIZE.1
+            );
+        }
+        let target = {
+            let mut image = Image::new_uninit(
+                Extent3d {
+                    width: SIZE.0,
+                    height: SIZE.1,
+                    depth_or_array_layers: 1,
+                },
+                TextureDimension::D2,
+                TextureFormat::Rgba8UnormSrgb,
+                RenderAssetUsages::RENDER_WORLD,
+            );
+            image.texture_descriptor.usage |= TextureUsages::RENDER_ATTACHMENT
+                | TextureUsages::COPY_SRC
+                | TextureUsages::TEXTURE_BINDING;
+            app.world_mut().resource_mut::<Assets<Image>>().add(image)
+        };
+        super::kiosk::ready_statue(&mut app, cloud, skel, binding);
+        {
+            let margins = *app.world().resource::<SceneMargins>();
+            let mut orbit = app.world_mut().resource_mut::<OrbitCamera>();
+            frame_camera(
+                &mut orbit,
+                cloud,
+                Vec2::new(SIZE.0 as f32, SIZE.1 as f32),
+                margins,
+            );
+        }
+        // The first frame spawns the camera (Startup); it then draws into the image.
+        app.update();
+        let cameras: Vec<Entity> = app
+            .world_mut()
+            .query_filtered::<Entity, With<KioskCamera>>()
+            .iter(app.world())
+            .collect();
+        if cameras.is_empty() {
+            return Err(Error::input(format!("{name}: the kiosk spawned no camera")));
+        }
+        for c in cameras {
+            app.world_mut()
+                .entity_mut(c)
+                .insert(RenderTarget::Image(target.clone().into()));
+        }
+        Ok(Offscreen { app, target })
     }
 
-    let target = {
-        let mut image = Image::new_uninit(
-            Extent3d {
-                width: SIZE.0,
-                height: SIZE.1,
-                depth_or_array_layers: 1,
-            },
-            TextureDimension::D2,
-            TextureFormat::Rgba8UnormSrgb,
-            RenderAssetUsages::RENDER_WORLD,
-        );
-        image.texture_descriptor.usage |= TextureUsages::RENDER_ATTACHMENT
-            | TextureUsages::COPY_SRC
-            | TextureUsages::TEXTURE_BINDING;
-        app.world_mut().resource_mut::<Assets<Image>>().add(image)
-    };
-
-    let cloud = Arc::new(cloud);
-    super::kiosk::ready_statue(&mut app, &cloud, &skel, binding);
-    {
-        let margins = *app.world().resource::<SceneMargins>();
-        let mut orbit = app.world_mut().resource_mut::<OrbitCamera>();
-        frame_camera(
-            &mut orbit,
-            &cloud,
-            Vec2::new(SIZE.0 as f32, SIZE.1 as f32),
-            margins,
-        );
-    }
-    // The first frame spawns the camera (Startup); it then draws into the image.
-    app.update();
-    let cameras: Vec<Entity> = app
-        .world_mut()
-        .query_filtered::<Entity, With<KioskCamera>>()
-        .iter(app.world())
-        .collect();
-    if cameras.is_empty() {
-        return Err(Error::input(format!("{name}: the kiosk spawned no camera")));
-    }
-    for c in cameras {
-        app.world_mut()
-            .entity_mut(c)
-            .insert(RenderTarget::Image(target.clone().into()));
-    }
-    if animate {
-        app.world_mut()
-            .write_message(PoseRequested("greeting".into()));
-    }
-
-    let wait = |app: &App| {
-        let _ = app
+    /// Waits until the GPU has finished everything submitted so far.
+    pub fn wait(&self) {
+        let _ = self
+            .app
             .world()
             .resource::<RenderDevice>()
             .wgpu_device()
@@ -183,24 +191,54 @@ pub fn frames(name: &str, points: usize, runs: usize, animate: bool) -> Result<B
                 submission_index: None,
                 timeout: None,
             });
-    };
-    let mut drawn = 0;
-    for _ in 0..PATIENCE {
-        app.update();
-        wait(&app);
-        if let Ok(p) = app.world_mut().query::<&SplatPoints>().single(app.world()) {
-            drawn = p.count;
-            break;
+    }
+
+    /// One frame, up to the GPU having finished it.
+    pub fn frame(&mut self) {
+        self.app.update();
+        self.wait();
+    }
+
+    /// Frames until the statue's splats exist; the number of points drawn. Errors (labelled
+    /// `name`) when they never appear.
+    pub fn until_drawn(&mut self, name: &str) -> Result<usize> {
+        for _ in 0..PATIENCE {
+            self.frame();
+            if let Ok(p) = self
+                .app
+                .world_mut()
+                .query::<&SplatPoints>()
+                .single(self.app.world())
+            {
+                return Ok(p.count);
+            }
         }
-    }
-    if drawn == 0 {
-        return Err(Error::input(format!(
+        Err(Error::input(format!(
             "{name}: the statue's splats never appeared"
-        )));
+        )))
     }
+}
+
+/// Times `runs` frames of the kiosk drawing a synthetic statue of `points` points off-screen,
+/// animating it when `animate` (see the module docs); `name` labels the result and the errors.
+pub fn frames(name: &str, points: usize, runs: usize, animate: bool) -> Result<BenchResult> {
+    let (cloud, skel) = super::skin::statue(points)?;
+    let binding = Arc::new(Binding::new(&cloud, &skel)?);
+    let mut config = KioskConfig::default();
+    config.budget.point_budget = cloud.len();
+    config.skinning.pose_seconds = 1.0e6;
+    config.idle.attract_after_s = f32::INFINITY;
+    config.idle.still_there_after_s = f32::INFINITY;
+    let cloud = Arc::new(cloud);
+    let mut view = Offscreen::new(name, config, &cloud, &skel, binding)?;
+    if animate {
+        view.app
+            .world_mut()
+            .write_message(PoseRequested("greeting".into()));
+    }
+    let drawn = view.until_drawn(name)?;
     for _ in 0..5 {
-        app.update();
-        wait(&app);
+        view.frame();
     }
 
     let runs = runs.max(1);
@@ -208,15 +246,15 @@ pub fn frames(name: &str, points: usize, runs: usize, animate: bool) -> Result<B
     let mut cpu = Vec::with_capacity(runs);
     for _ in 0..runs {
         let t = Instant::now();
-        app.update();
+        view.app.update();
         cpu.push(t.elapsed().as_secs_f64());
-        wait(&app);
+        view.wait();
         period.push(t.elapsed().as_secs_f64());
     }
-    let skin_ms = app.world().resource::<SkinWork>().last_ms as f64;
-    let moved = app.world().resource::<SkinWork>().count;
+    let skin_ms = view.app.world().resource::<SkinWork>().last_ms as f64;
+    let moved = view.app.world().resource::<SkinWork>().count;
 
-    let fraction = statue_fraction(&mut app, &target, name)?;
+    let fraction = statue_fraction(&mut view, name)?;
     if fraction <= 0.0 {
         return Err(Error::input(format!(
             "{name}: the frames timed drew nothing (the screenshot is background only)"
@@ -238,8 +276,11 @@ pub fn frames(name: &str, points: usize, runs: usize, animate: bool) -> Result<B
     Ok(r)
 }
 
-/// The share of the scene band's pixels that differ from the background, from a screenshot.
-fn statue_fraction(app: &mut App, target: &Handle<Image>, name: &str) -> Result<f64> {
+/// The share of the scene band's pixels that differ from the background, from a screenshot
+/// (saved to `PYGMALION_BENCH_PICTURES` when set). Errors (labelled `name`): the screenshot
+/// never came back.
+pub fn statue_fraction(view: &mut Offscreen, name: &str) -> Result<f64> {
+    let (app, target) = (&mut view.app, &view.target);
     let got: Arc<Mutex<Option<Image>>> = Arc::default();
     let slot = got.clone();
     app.world_mut()

@@ -9,8 +9,8 @@
 //! ([`ATTRIBUTE_SPLAT_COLOR`], 4 bytes); two triangles per point. The points' centres and
 //! normals live in a storage buffer of the [`SplatMaterial`] (24 bytes a point,
 //! [`pack_points`]). Its vertex shader (`render/splat.wgsl`) reads the point's centre and
-//! normal there, the corner in `{±1}²` from [`CORNERS`], and (`render/splat.wgsl`) moves each corner by `±r` along two
-//! axes of the plane orthogonal to the normal, so the quad lies in the point's tangent plane
+//! normal there, the corner in `{±1}²` from [`CORNERS`], and moves each corner by `±r` along
+//! two axes of the plane orthogonal to the normal, so the quad lies in the point's tangent plane
 //! (depth follows the surface, splats of one surface overlap without z-fighting staircases);
 //! when the normal is seen nearly edge-on (`|n·v|` below 0.3) the quad turns smoothly to face
 //! the camera, so grazing splats do not vanish into slivers. The fragment shader discards the
@@ -31,8 +31,9 @@
 //! statue's staging bytes (in place, in parallel: no allocation) and written straight into the
 //! storage buffer (`RenderQueue::write_buffer`); the mesh is untouched. An earlier version kept
 //! centres and normals as mesh attributes, four copies per point, and rewrote the mesh: Bevy
-//! then cloned, interleaved and re-uploaded 144 MB for a million points, 236 ms a frame on an
-//! H200 machine (4 frames a second while a statue moved, against 112 standing still). The mesh
+//! then cloned, interleaved and re-uploaded 144 MB for a million points, 245 ms a frame on an
+//! H200 machine (4 frames a second while a statue moved, against 112 standing still; 104
+//! with the storage buffer, `bench --only render/`). The mesh
 //! has [`NoFrustumCulling`] since its bounds move with the pose. At most `budget.point_budget`
 //! points are drawn (the loader already subsamples; a larger buffer is strided), and no more
 //! than the device's largest storage binding holds.
@@ -517,6 +518,83 @@ pub fn splat_radius(positions: &[Vec3], point_scale: f32) -> f32 {
     }
 }
 
+/// A statue's splats, built: the drawn subset, its radius, its packed bytes on the GPU, the
+/// static mesh and the material.
+struct SplatBuild {
+    keep: Option<Vec<u32>>,
+    count: usize,
+    radius: f32,
+    staging: Vec<u8>,
+    buffer: Buffer,
+    mesh: Mesh,
+    material: SplatMaterial,
+}
+
+/// Builds the splats of `points` (`None`, with a warning, when their normals do not match).
+fn build_splats(
+    points: &SkinnedPoints,
+    cfg: &crate::kiosk::config::KioskConfig,
+    device: &RenderDevice,
+    queue: &RenderQueue,
+) -> Option<SplatBuild> {
+    // The storage buffer must fit the device's largest storage binding.
+    let fits = device.limits().max_storage_buffer_binding_size as usize / SPLAT_POINT_BYTES;
+    let budget = match cfg.budget.point_budget {
+        0 => fits,
+        b => b.min(fits),
+    };
+    let keep = budget_indices(points.positions.len(), budget);
+    let count = keep.as_ref().map_or(points.positions.len(), |k| k.len());
+    let radius = match &keep {
+        Some(k) => {
+            let sub: Vec<Vec3> = k.iter().map(|&i| points.positions[i as usize]).collect();
+            splat_radius(&sub, cfg.render.point_scale)
+        }
+        None => splat_radius(&points.positions, cfg.render.point_scale),
+    };
+    let mut staging = vec![0u8; SPLAT_POINT_BYTES * count];
+    if !pack_points(&mut staging, points, keep.as_deref()) {
+        warn!("the statue's normals do not match its points: not drawn");
+        return None;
+    }
+    let buffer = device.create_buffer(&BufferDescriptor {
+        label: Some("pygmalion splat points"),
+        size: staging.len().max(SPLAT_POINT_BYTES) as u64,
+        usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    if !staging.is_empty() {
+        queue.write_buffer(&buffer, 0, &staging);
+    }
+    let mesh = splat_mesh(points, keep.as_deref());
+    let base = if points.colors.is_some() {
+        Vec3::ONE
+    } else {
+        Vec3::from_array(STONE.map(|c| c as f32 / 255.0))
+    };
+    let material = SplatMaterial {
+        params: SplatParams {
+            base_color: base.extend(1.0),
+            key_light: KEY_LIGHT_VIEW.normalize().extend(0.3),
+            radius,
+            min_pixels: MIN_SPLAT_PIXELS,
+            edge_on: 0.3,
+            edges: if cfg.render.edl { 1.0 } else { 0.0 },
+        },
+        points: buffer.clone(),
+    };
+    info!("drawing {count} points as splats of radius {radius:.4}");
+    Some(SplatBuild {
+        keep,
+        count,
+        radius,
+        staging,
+        buffer,
+        mesh,
+        material,
+    })
+}
+
 #[allow(clippy::type_complexity)]
 fn attach_points(
     mut commands: Commands,
@@ -527,59 +605,16 @@ fn attach_points(
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<SplatMaterial>>,
 ) {
-    let cfg = &settings.0;
-    // The storage buffer must fit the device's largest storage binding.
-    let fits = device.limits().max_storage_buffer_binding_size as usize / SPLAT_POINT_BYTES;
     for (statue, points) in &statues {
-        let budget = match cfg.budget.point_budget {
-            0 => fits,
-            b => b.min(fits),
-        };
-        let keep = budget_indices(points.positions.len(), budget);
-        let count = keep.as_ref().map_or(points.positions.len(), |k| k.len());
-        let radius = match &keep {
-            Some(k) => {
-                let sub: Vec<Vec3> = k.iter().map(|&i| points.positions[i as usize]).collect();
-                splat_radius(&sub, cfg.render.point_scale)
-            }
-            None => splat_radius(&points.positions, cfg.render.point_scale),
-        };
-        let mut staging = vec![0u8; SPLAT_POINT_BYTES * count];
-        if !pack_points(&mut staging, points, keep.as_deref()) {
-            warn!("the statue's normals do not match its points: not drawn");
+        let Some(b) = build_splats(points, &settings.0, &device, &queue) else {
             continue;
-        }
-        let buffer = device.create_buffer(&BufferDescriptor {
-            label: Some("pygmalion splat points"),
-            size: staging.len().max(SPLAT_POINT_BYTES) as u64,
-            usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        if !staging.is_empty() {
-            queue.write_buffer(&buffer, 0, &staging);
-        }
-        let mesh = meshes.add(splat_mesh(points, keep.as_deref()));
-        let base = if points.colors.is_some() {
-            Vec3::ONE
-        } else {
-            Vec3::from_array(STONE.map(|c| c as f32 / 255.0))
         };
-        let material = materials.add(SplatMaterial {
-            params: SplatParams {
-                base_color: base.extend(1.0),
-                key_light: KEY_LIGHT_VIEW.normalize().extend(0.3),
-                radius,
-                min_pixels: MIN_SPLAT_PIXELS,
-                edge_on: 0.3,
-                edges: if cfg.render.edl { 1.0 } else { 0.0 },
-            },
-            points: buffer.clone(),
-        });
+        let mesh = meshes.add(b.mesh);
         let child = commands
             .spawn((
                 Name::new("points"),
                 Mesh3d(mesh.clone()),
-                MeshMaterial3d(material),
+                MeshMaterial3d(materials.add(b.material)),
                 NoFrustumCulling,
                 Transform::default(),
                 Visibility::default(),
@@ -590,38 +625,54 @@ fn attach_points(
             entity: child,
             mesh,
             version: points.version,
-            keep,
-            count,
-            radius,
-            buffer,
-            staging,
+            keep: b.keep,
+            count: b.count,
+            radius: b.radius,
+            buffer: b.buffer,
+            staging: b.staging,
         });
-        info!("drawing {count} points as splats of radius {radius:.4}");
     }
 }
 
 /// A new pose: the drawn points are packed into the statue's staging bytes (no allocation)
-/// and written to its storage buffer, which the GPU reads from its next frame on.
+/// and written to its storage buffer, which the GPU reads from its next frame on. Points of
+/// another number (a restoration shown or undone) get new splats on the same entity, drawn
+/// from this frame on.
+#[allow(clippy::too_many_arguments)]
 fn update_points(
     mut commands: Commands,
-    mut statues: Query<(Entity, &SkinnedPoints, &mut SplatPoints)>,
+    mut statues: Query<(&SkinnedPoints, &mut SplatPoints)>,
+    settings: Res<Settings>,
+    device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<SplatMaterial>>,
 ) {
-    for (statue, points, mut splats) in &mut statues {
+    for (points, mut splats) in &mut statues {
         if splats.version == points.version {
             continue;
         }
         let splats = &mut *splats;
-        if !pack_points(&mut splats.staging, points, splats.keep.as_deref()) {
-            // The points changed in number: draw them afresh.
-            commands.entity(splats.entity).despawn();
-            commands.entity(statue).remove::<SplatPoints>();
+        splats.version = points.version;
+        if pack_points(&mut splats.staging, points, splats.keep.as_deref()) {
+            if !splats.staging.is_empty() {
+                queue.write_buffer(&splats.buffer, 0, &splats.staging);
+            }
             continue;
         }
-        if !splats.staging.is_empty() {
-            queue.write_buffer(&splats.buffer, 0, &splats.staging);
-        }
-        splats.version = points.version;
+        let Some(b) = build_splats(points, &settings.0, &device, &queue) else {
+            continue;
+        };
+        splats.mesh = meshes.add(b.mesh);
+        commands.entity(splats.entity).insert((
+            Mesh3d(splats.mesh.clone()),
+            MeshMaterial3d(materials.add(b.material)),
+        ));
+        splats.keep = b.keep;
+        splats.count = b.count;
+        splats.radius = b.radius;
+        splats.buffer = b.buffer;
+        splats.staging = b.staging;
     }
 }
 
