@@ -4,8 +4,8 @@
 //! bound.
 //!
 //! - `render/kiosk_1m`: the statue animates towards the `greeting` pose the whole time (a pose
-//!   change stretched over 10⁶ s), so every frame re-skins the million points, rewrites the
-//!   splat mesh and uploads it: the frame a visitor sees while a statue moves.
+//!   change stretched over 10⁶ s), so every frame re-skins the million points, packs them and
+//!   writes them to the splats' storage buffer: the frame a visitor sees while a statue moves.
 //! - `render/kiosk_1m_still`: the same statue standing still: drawing alone.
 //!
 //! ## Method
@@ -21,13 +21,15 @@
 //! systems plus any wait for the render world, still busy with the frame before, to come back
 //! for extraction), `skin_ms` (the skinning system, last frame), `points` drawn, and
 //! `statue_fraction`, the share of the scene band's pixels (the rows between the kiosk's top
-//! bar and its pose strip) that are not background in a screenshot taken after the timed frames — the check that the frames timed did draw the statue (an empty picture is an
+//! bar and its pose strip) that are not background in a screenshot taken after the timed
+//! frames — the check that the frames timed did draw the statue (an empty picture is an
 //! error, not a figure). The adapter's name goes to standard error. With the environment
 //! variable `PYGMALION_BENCH_PICTURES` naming a folder, that screenshot is saved there as
 //! `render_kiosk_1m.png` (…), to look at.
 //!
-//! These benchmarks need a GPU (Mesa's software Vulkan runs them, at a few seconds a frame):
-//! `pygmalion bench` leaves them out unless `--only` names them (`--only render/`).
+//! These benchmarks need a GPU (Mesa's software Vulkan runs them, at about 0.6 s a frame on a
+//! 2-core machine): `pygmalion bench` leaves them out unless `--only` names them
+//! (`--only render/`). Their harness, [`Offscreen`], also serves the rendering tests.
 
 use super::{BenchResult, Entry};
 use crate::anatomy::Skeleton;
@@ -242,6 +244,7 @@ pub fn frames(name: &str, points: usize, runs: usize, animate: bool) -> Result<B
     }
 
     let runs = runs.max(1);
+    let skinned_before = view.app.world().resource::<SkinWork>().count;
     let mut period = Vec::with_capacity(runs);
     let mut cpu = Vec::with_capacity(runs);
     for _ in 0..runs {
@@ -252,7 +255,7 @@ pub fn frames(name: &str, points: usize, runs: usize, animate: bool) -> Result<B
         period.push(t.elapsed().as_secs_f64());
     }
     let skin_ms = view.app.world().resource::<SkinWork>().last_ms as f64;
-    let moved = view.app.world().resource::<SkinWork>().count;
+    let moved = view.app.world().resource::<SkinWork>().count - skinned_before;
 
     let fraction = statue_fraction(&mut view, name)?;
     if fraction <= 0.0 {
