@@ -36,7 +36,7 @@ use crate::anatomy::Skeleton;
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
 use crate::kiosk::animate::SkinWork;
-use crate::kiosk::config::KioskConfig;
+use crate::kiosk::config::{KioskConfig, StatueEntry};
 use crate::kiosk::render::{KioskCamera, SplatPoints, capture_rgb};
 use crate::kiosk::statue::frame_camera;
 use crate::kiosk::{KioskPlugin, OrbitCamera, PoseRequested, SceneMargins};
@@ -87,7 +87,8 @@ pub struct Offscreen {
 }
 
 impl Offscreen {
-    /// A kiosk configured by `config` (its window size is replaced by [`SIZE`]) showing `cloud`,
+    /// A kiosk configured by `config` (its window size is replaced by [`SIZE`], its statues by
+    /// this one) showing `cloud`,
     /// fitted to `skel` and bound, framed as the kiosk frames a statue; one frame has run.
     /// Errors (labelled `name`): no GPU adapter, no camera.
     pub fn new(
@@ -99,6 +100,16 @@ impl Offscreen {
     ) -> Result<Offscreen> {
         config.window.width = SIZE.0;
         config.window.height = SIZE.1;
+        // The carousel lists the statue shown (no other statue is loaded or lends parts).
+        config.statues = vec![StatueEntry {
+            file: "synthetic.ply".into(),
+            template: skel.template.name.clone(),
+            title: "Synthetic statue".into(),
+            credit: format!("{} points", cloud.len()),
+            up: None,
+            front: None,
+            missing: Vec::new(),
+        }];
         // Bevy's log plugin sets a global logger: only the first app of the process may add it.
         static LOGGING: AtomicBool = AtomicBool::new(false);
         let mut plugins = DefaultPlugins.build();
