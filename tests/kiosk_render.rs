@@ -347,35 +347,16 @@ fn the_gpu_frame_bench_draws_the_statue_while_it_moves() {
 /// the splats are rebuilt there (buffer, mesh and material) and the statue stays drawn.
 #[test]
 fn the_splats_follow_a_statue_whose_points_change_in_number() {
-    use pygmalion::anatomy::Template;
     use pygmalion::bench::render::{Offscreen, statue_fraction};
     use pygmalion::kiosk::SkinnedPoints;
     use pygmalion::kiosk::config::KioskConfig;
     use pygmalion::kiosk::render::{SPLAT_POINT_BYTES, SplatPoints};
-    use pygmalion::skinning::Binding;
-    use pygmalion::synth::{SynthOptions, generate};
-    use std::sync::Arc;
     if !enabled() {
         println!("skipped: needs Vulkan (PYGMALION_RENDER_TESTS=1)");
         return;
     }
-    let t = Arc::new(Template::builtin("human").unwrap());
-    let s = generate(
-        t,
-        &SynthOptions {
-            points: 20_000,
-            seed: 42,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    let binding = Arc::new(Binding::new(&s.cloud, &s.truth).unwrap());
-    let cloud = Arc::new(s.cloud);
-    let mut config = KioskConfig::default();
-    config.idle.attract_after_s = f32::INFINITY;
-    config.idle.still_there_after_s = f32::INFINITY;
     let name = "test/splats_renumbered";
-    let mut view = Offscreen::new(name, config, &cloud, &s.truth, binding).unwrap();
+    let mut view = Offscreen::synthetic(name, 20_000, KioskConfig::default()).unwrap();
     assert_eq!(view.until_drawn(name).unwrap(), 20_000);
     let before = statue_fraction(&mut view, name).unwrap();
     let splats = |view: &mut Offscreen| {

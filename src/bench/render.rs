@@ -88,7 +88,8 @@ pub struct Offscreen {
 
 impl Offscreen {
     /// A kiosk configured by `config` (its window size is replaced by [`SIZE`], its statues by
-    /// this one) showing `cloud`,
+    /// this one, its idle timeouts by never: attract mode would turn the camera) showing
+    /// `cloud`,
     /// fitted to `skel` and bound, framed as the kiosk frames a statue; one frame has run.
     /// Errors (labelled `name`): no GPU adapter, no camera.
     pub fn new(
@@ -100,6 +101,8 @@ impl Offscreen {
     ) -> Result<Offscreen> {
         config.window.width = SIZE.0;
         config.window.height = SIZE.1;
+        config.idle.attract_after_s = f32::INFINITY;
+        config.idle.still_there_after_s = f32::INFINITY;
         // The carousel lists the statue shown (no other statue is loaded or lends parts).
         config.statues = vec![StatueEntry {
             file: "synthetic.ply".into(),
@@ -193,6 +196,14 @@ impl Offscreen {
         Ok(Offscreen { app, target })
     }
 
+    /// [`Offscreen::new`] on the benchmarks' synthetic statue of `points` points (seed 42,
+    /// fitted to its ground truth and bound).
+    pub fn synthetic(name: &str, points: usize, config: KioskConfig) -> Result<Offscreen> {
+        let (cloud, skel) = super::skin::statue(points)?;
+        let binding = Arc::new(Binding::new(&cloud, &skel)?);
+        Offscreen::new(name, config, &Arc::new(cloud), &skel, binding)
+    }
+
     /// Waits until the GPU has finished everything submitted so far.
     pub fn wait(&self) {
         let _ = self
@@ -235,15 +246,10 @@ impl Offscreen {
 /// Times `runs` frames of the kiosk drawing a synthetic statue of `points` points off-screen,
 /// animating it when `animate` (see the module docs); `name` labels the result and the errors.
 pub fn frames(name: &str, points: usize, runs: usize, animate: bool) -> Result<BenchResult> {
-    let (cloud, skel) = super::skin::statue(points)?;
-    let binding = Arc::new(Binding::new(&cloud, &skel)?);
     let mut config = KioskConfig::default();
-    config.budget.point_budget = cloud.len();
+    config.budget.point_budget = points;
     config.skinning.pose_seconds = 1.0e6;
-    config.idle.attract_after_s = f32::INFINITY;
-    config.idle.still_there_after_s = f32::INFINITY;
-    let cloud = Arc::new(cloud);
-    let mut view = Offscreen::new(name, config, &cloud, &skel, binding)?;
+    let mut view = Offscreen::synthetic(name, points, config)?;
     if animate {
         view.app
             .world_mut()

@@ -518,25 +518,16 @@ pub fn splat_radius(positions: &[Vec3], point_scale: f32) -> f32 {
     }
 }
 
-/// A statue's splats, built: the drawn subset, its radius, its packed bytes on the GPU, the
-/// static mesh and the material.
-struct SplatBuild {
-    keep: Option<Vec<u32>>,
-    count: usize,
-    radius: f32,
-    staging: Vec<u8>,
-    buffer: Buffer,
-    mesh: Mesh,
-    material: SplatMaterial,
-}
-
-/// Builds the splats of `points` (`None`, with a warning, when their normals do not match).
+/// Builds the splats of `points` (`None`, with a warning, when their normals do not match):
+/// their [`SplatPoints`] (its `entity` and `mesh` left for the caller to fill: a placeholder
+/// and the default handle), the static mesh and the material, the points already written to
+/// the new storage buffer.
 fn build_splats(
     points: &SkinnedPoints,
     cfg: &crate::kiosk::config::KioskConfig,
     device: &RenderDevice,
     queue: &RenderQueue,
-) -> Option<SplatBuild> {
+) -> Option<(SplatPoints, Mesh, SplatMaterial)> {
     // The storage buffer must fit the device's largest storage binding.
     let fits = device.limits().max_storage_buffer_binding_size as usize / SPLAT_POINT_BYTES;
     let budget = match cfg.budget.point_budget {
@@ -584,15 +575,17 @@ fn build_splats(
         points: buffer.clone(),
     };
     info!("drawing {count} points as splats of radius {radius:.4}");
-    Some(SplatBuild {
+    let splats = SplatPoints {
+        entity: Entity::PLACEHOLDER,
+        mesh: Handle::default(),
+        version: points.version,
         keep,
         count,
         radius,
-        staging,
         buffer,
-        mesh,
-        material,
-    })
+        staging,
+    };
+    Some((splats, mesh, material))
 }
 
 #[allow(clippy::type_complexity)]
@@ -606,31 +599,23 @@ fn attach_points(
     mut materials: ResMut<Assets<SplatMaterial>>,
 ) {
     for (statue, points) in &statues {
-        let Some(b) = build_splats(points, &settings.0, &device, &queue) else {
+        let Some((mut splats, mesh, material)) = build_splats(points, &settings.0, &device, &queue)
+        else {
             continue;
         };
-        let mesh = meshes.add(b.mesh);
-        let child = commands
+        splats.mesh = meshes.add(mesh);
+        splats.entity = commands
             .spawn((
                 Name::new("points"),
-                Mesh3d(mesh.clone()),
-                MeshMaterial3d(materials.add(b.material)),
+                Mesh3d(splats.mesh.clone()),
+                MeshMaterial3d(materials.add(material)),
                 NoFrustumCulling,
                 Transform::default(),
                 Visibility::default(),
                 ChildOf(statue),
             ))
             .id();
-        commands.entity(statue).insert(SplatPoints {
-            entity: child,
-            mesh,
-            version: points.version,
-            keep: b.keep,
-            count: b.count,
-            radius: b.radius,
-            buffer: b.buffer,
-            staging: b.staging,
-        });
+        commands.entity(statue).insert(splats);
     }
 }
 
@@ -660,19 +645,17 @@ fn update_points(
             }
             continue;
         }
-        let Some(b) = build_splats(points, &settings.0, &device, &queue) else {
+        let Some((mut fresh, mesh, material)) = build_splats(points, &settings.0, &device, &queue)
+        else {
             continue;
         };
-        splats.mesh = meshes.add(b.mesh);
-        commands.entity(splats.entity).insert((
-            Mesh3d(splats.mesh.clone()),
-            MeshMaterial3d(materials.add(b.material)),
+        fresh.entity = splats.entity;
+        fresh.mesh = meshes.add(mesh);
+        commands.entity(fresh.entity).insert((
+            Mesh3d(fresh.mesh.clone()),
+            MeshMaterial3d(materials.add(material)),
         ));
-        splats.keep = b.keep;
-        splats.count = b.count;
-        splats.radius = b.radius;
-        splats.buffer = b.buffer;
-        splats.staging = b.staging;
+        *splats = fresh;
     }
 }
 
