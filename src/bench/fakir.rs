@@ -147,7 +147,7 @@ impl Pause for UnitTimer {
 /// core for a scheduler slice lengthens a random unit by milliseconds (rayon waits for the
 /// descheduled thread), so each unit's work is measured by its **shortest time over the
 /// runs** (`unit_min_*`: `max` the longest such unit, `p99`, `p50`, and `max_ms.<phase>.l<level>`
-/// where they come from). The raw times of the last run are given too (`raw_max_unit_ms`,
+/// where they come from; `total_s.<phase>.l<level>` the time spent in each phase). The raw times of the last run are given too (`raw_max_unit_ms`,
 /// `raw_units_over_2ms`), noise included.
 fn unit_100k(runs: usize) -> Result<BenchResult> {
     unit_times("fakir/unit_100k", &human(100_000)?, runs)
@@ -202,11 +202,13 @@ fn unit_times(name: &str, statue: &SynthStatue, runs: usize) -> Result<BenchResu
     let mut longest = std::collections::BTreeMap::<String, f64>::new();
     for (d, phase, level) in &shortest {
         let key = if *phase == "setup" {
-            "max_ms.setup".to_string()
+            "setup".to_string()
         } else {
-            format!("max_ms.{phase}.l{level}")
+            format!("{phase}.l{level}")
         };
-        let e = longest.entry(key).or_default();
+        // Where the time goes: each phase's total, and its longest unit.
+        *longest.entry(format!("total_s.{key}")).or_default() += d;
+        let e = longest.entry(format!("max_ms.{key}")).or_default();
         *e = e.max(1e3 * d);
     }
     let sorted = |v: &[(f64, &'static str, usize)]| {
