@@ -37,6 +37,9 @@ use serde::Serialize;
 
 /// Surface samples per bone.
 pub const SAMPLES: usize = 600;
+
+/// Samples examined together by one parallel task ([`coverage_of`]).
+const SAMPLE_CHUNK: usize = 100;
 /// Axial bins for `reach`.
 pub const BINS: usize = 10;
 /// Coverage below which a bone is missing.
@@ -358,7 +361,9 @@ impl<'a> SupportExam<'a> {
     }
 }
 
-/// Coverage and reach of bone `k` of a posed skeleton (see the module docs).
+/// Coverage and reach of bone `k` of a posed skeleton (see the module docs). The samples
+/// are drawn in sequence from the bone's own seed and examined in parallel; the counts are
+/// integers, so their sum does not depend on the order.
 fn coverage_of(
     k: usize,
     posed: &crate::anatomy::Posed,
@@ -371,36 +376,51 @@ fn coverage_of(
     let radius = 0.5 * (b.r1 + b.r2);
     let tol = (2.5 * rho).max(0.5 * radius);
     let mut rng = Rng::new(0x5u64.wrapping_add(k as u64 * 7919));
-    let mut bins = [(0u32, 0u32); BINS];
-    let (mut visible, mut covered) = (0u32, 0u32);
-    for _ in 0..SAMPLES {
-        let (p, _) = pb.sample_surface(&mut rng);
-        let inside_other = prepared
-            .iter()
-            .enumerate()
-            .any(|(j, o)| j != k && o.sdf_fast(p) < -0.02 * radius);
-        if inside_other {
-            continue;
+    let samples: Vec<Vec3> = (0..SAMPLES)
+        .map(|_| pb.sample_surface(&mut rng).0)
+        .collect();
+    let examine = |chunk: &[Vec3]| {
+        let mut bins = [(0u32, 0u32); BINS];
+        let (mut visible, mut covered) = (0u32, 0u32);
+        for &p in chunk {
+            let inside_other = prepared
+                .iter()
+                .enumerate()
+                .any(|(j, o)| j != k && o.sdf_fast(p) < -0.02 * radius);
+            if inside_other {
+                continue;
+            }
+            visible += 1;
+            let near = tree
+                .query(&p.to_array())
+                .nearest_n::<SquaredEuclidean<f32>>(std::num::NonZero::new(1).expect("1 > 0"))
+                .execute()
+                .first()
+                .is_some_and(|n| n.distance.sqrt() <= tol);
+            let axial = if pb.length > 1e-12 {
+                ((p - b.c1).dot(pb.axis) / pb.length).clamp(0.0, 0.9999)
+            } else {
+                0.0
+            };
+            let bin = (axial * BINS as f32) as usize;
+            bins[bin].0 += 1;
+            if near {
+                covered += 1;
+                bins[bin].1 += 1;
+            }
         }
-        visible += 1;
-        let near = tree
-            .query(&p.to_array())
-            .nearest_n::<SquaredEuclidean<f32>>(std::num::NonZero::new(1).expect("1 > 0"))
-            .execute()
-            .first()
-            .is_some_and(|n| n.distance.sqrt() <= tol);
-        let axial = if pb.length > 1e-12 {
-            ((p - b.c1).dot(pb.axis) / pb.length).clamp(0.0, 0.9999)
-        } else {
-            0.0
-        };
-        let bin = (axial * BINS as f32) as usize;
-        bins[bin].0 += 1;
-        if near {
-            covered += 1;
-            bins[bin].1 += 1;
-        }
-    }
+        (bins, visible, covered)
+    };
+    let (bins, visible, covered) = samples.par_chunks(SAMPLE_CHUNK).map(examine).reduce(
+        || ([(0u32, 0u32); BINS], 0u32, 0u32),
+        |mut a, b| {
+            for (x, y) in a.0.iter_mut().zip(&b.0) {
+                x.0 += y.0;
+                x.1 += y.1;
+            }
+            (a.0, a.1 + b.1, a.2 + b.2)
+        },
+    );
     // Entirely hidden inside other bones: nothing to see, nothing missing.
     let coverage = if visible > 0 {
         covered as f32 / visible as f32
