@@ -146,8 +146,9 @@ impl Pause for UnitTimer {
 /// same order; the warm-up run is timed too. On this 2-core machine another process taking a
 /// core for a scheduler slice lengthens a random unit by milliseconds (rayon waits for the
 /// descheduled thread), so each unit's work is measured by its **shortest time over the
-/// runs** (`unit_min_*`: `max` the longest such unit, `p99`, `p50`, and `max_ms.<phase>.l<level>`
-/// where they come from; `total_s.<phase>.l<level>` the time spent in each phase). The raw times of the last run are given too (`raw_max_unit_ms`,
+/// runs** (`unit_min_*`: `max` the longest such unit, `p99`, `p50`, and
+/// `max_ms.<phase>.l<level>` where they come from; `total_s.<phase>.l<level>` the time spent
+/// in each phase). The raw times of the last run are given too (`raw_max_unit_ms`,
 /// `raw_units_over_2ms`), noise included.
 fn unit_100k(runs: usize) -> Result<BenchResult> {
     unit_times("fakir/unit_100k", &human(100_000)?, runs)

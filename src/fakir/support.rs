@@ -40,6 +40,7 @@ pub const SAMPLES: usize = 600;
 
 /// Samples examined together by one parallel task ([`coverage_of`]).
 const SAMPLE_CHUNK: usize = 100;
+
 /// Axial bins for `reach`.
 pub const BINS: usize = 10;
 /// Coverage below which a bone is missing.
