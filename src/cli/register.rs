@@ -190,23 +190,11 @@ pub fn parse_bone_list(list: Option<&str>) -> Vec<String> {
     .unwrap_or_default()
 }
 
-/// Fits `template` to a cloud already read from `input` (named in messages), with the
-/// progress line, the summary and the optional outputs of `register`.
-pub fn fit(
-    input: &Path,
-    cloud: Arc<crate::cloud::PointCloud>,
-    template: Arc<Template>,
-    opts: RegistrationOptions,
-    out: Option<&Path>,
-    labels: Option<&Path>,
-) -> Result<()> {
-    let mut reg = Registration::new(cloud.clone(), template.clone(), opts)
-        .map_err(|e| Error::input(format!("{}: {e}", input.display())))?;
-    let start = Instant::now();
-    let tty = std::io::stderr().is_terminal();
+/// Runs `reg` in steps of 100 ms, drawing the progress line on the terminal between steps.
+fn stepped(reg: &mut Registration, start: Instant) -> Result<crate::fakir::Fit> {
     while !reg.is_done() {
         let p = reg.step(Duration::from_millis(100));
-        if tty && !p.done {
+        if !p.done {
             eprint!(
                 "\r{:<14} {:<10} iteration {} pass {} level {}  mean distance {:.5}  {:>8} units  {:5.1} s ",
                 p.activity.phase,
@@ -221,10 +209,32 @@ pub fn fit(
             let _ = std::io::stderr().flush();
         }
     }
-    if tty {
-        eprintln!();
-    }
-    let fit = reg.take_result().expect("finished").map_err(|e| {
+    eprintln!();
+    reg.take_result().expect("finished")
+}
+
+/// Fits `template` to a cloud already read from `input` (named in messages), with the
+/// progress line, the summary and the optional outputs of `register`.
+pub fn fit(
+    input: &Path,
+    cloud: Arc<crate::cloud::PointCloud>,
+    template: Arc<Template>,
+    opts: RegistrationOptions,
+    out: Option<&Path>,
+    labels: Option<&Path>,
+) -> Result<()> {
+    let mut reg = Registration::new(cloud.clone(), template.clone(), opts)
+        .map_err(|e| Error::input(format!("{}: {e}", input.display())))?;
+    let start = Instant::now();
+    let tty = std::io::stderr().is_terminal();
+    // Without a terminal there is no progress line to draw: the registration runs without
+    // pauses, which lets it register its finalists at the same time (same result).
+    let result = if tty {
+        stepped(&mut reg, start)
+    } else {
+        reg.run_to_convergence()
+    };
+    let fit = result.map_err(|e| {
         Error::input(format!(
             "{}: cannot fit the '{}' template: {e}",
             input.display(),

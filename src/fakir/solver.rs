@@ -62,6 +62,14 @@ pub trait Pause {
     /// `solver`: the solver whose unit ended, or `None` for a unit of set-up work between
     /// solvers (placing the candidates, starting a level).
     fn unit(&mut self, solver: Option<&Solver>) -> Result<(), Cancelled>;
+
+    /// True when the hook never pauses, never cancels and reads nothing: the registration may
+    /// then run independent solvers at the same time, each with a [`NoPause`] of its own
+    /// (the finalists, the scale restarts), and compute exactly what it computes one solver
+    /// after the other.
+    fn never_pauses(&self) -> bool {
+        false
+    }
 }
 
 /// A pause hook that never pauses.
@@ -69,6 +77,10 @@ pub struct NoPause;
 impl Pause for NoPause {
     fn unit(&mut self, _: Option<&Solver>) -> Result<(), Cancelled> {
         Ok(())
+    }
+
+    fn never_pauses(&self) -> bool {
+        true
     }
 }
 
