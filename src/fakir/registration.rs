@@ -456,10 +456,13 @@ pub fn register(
         free_root,
         lost: &given_lost,
     };
-    let starts: Vec<(usize, &Candidate, (f32, f32))> = order
+    let starts: Vec<Start> = order
         .iter()
         .enumerate()
-        .map(|(j, &ci)| (ci, &cands[ci], span(finalists_start, level1_start, j, runs)))
+        .map(|(j, &ci)| {
+            let sp = span(finalists_start, level1_start, j, runs);
+            (ci, cands[ci].clone(), sp)
+        })
         .collect();
     let mut finals = full.run_all(&starts, pause, &mut fraction)?;
     // Near-ties are decided by anatomy (see `init`): a well-fitted figure facing the right
@@ -472,16 +475,12 @@ pub fn register(
         Init::Anchor { anchor, .. } => *anchor,
         _ => centroid(&level0_points),
     };
-    let restarts: Vec<Candidate> = rescales
-        .iter()
-        .map(|&f| rescaled(&cands[chosen], pivot, f))
-        .collect();
-    let starts: Vec<(usize, &Candidate, (f32, f32))> = restarts
+    let starts: Vec<Start> = rescales
         .iter()
         .enumerate()
-        .map(|(j, c)| {
+        .map(|(j, &f)| {
             let sp = span(finalists_start, level1_start, order.len() + j, runs);
-            (chosen, c, sp)
+            (chosen, rescaled(&cands[chosen], pivot, f), sp)
         })
         .collect();
     for r in full.run_all(&starts, pause, &mut fraction)? {
@@ -776,6 +775,10 @@ fn preferred(fits: &[FullFit]) -> usize {
 /// Near-ties of two-sided scores (factor) that anatomy decides ([`preferred`]).
 const NEAR_TIE: f64 = 1.5;
 
+/// A full level-0 registration to run ([`FullRun::run_all`]): the candidate it comes from,
+/// its start and its progress span.
+type Start = (usize, Candidate, (f32, f32));
+
 /// The outcome of a full level-0 registration.
 struct FullFit {
     /// Two-sided score (mean distance + occupancy).
@@ -887,27 +890,26 @@ impl FullRun<'_> {
     /// so every work unit stays short and the progress shows each.
     fn run_all(
         &self,
-        starts: &[(usize, &Candidate, (f32, f32))],
+        starts: &[Start],
         pause: &mut dyn Pause,
         fraction: &mut f32,
     ) -> Result<Vec<FullFit>> {
         if pause.never_pauses() && starts.len() > 1 {
             let from = *fraction;
-            let fits: Vec<(FullFit, f32)> = starts
+            let fits = starts
                 .par_iter()
-                .map(|&(ci, c, sp)| {
+                .map(|(ci, c, sp)| {
                     let mut f = from;
-                    self.run(ci, c, &mut NoPause, &mut f, sp).map(|r| (r, f))
+                    self.run(*ci, c, &mut NoPause, &mut f, *sp)
                 })
-                .collect::<Result<_>>()?;
-            for (_, f) in &fits {
-                *fraction = fraction.max(*f);
-            }
-            return Ok(fits.into_iter().map(|(r, _)| r).collect());
+                .collect::<Result<Vec<_>>>()?;
+            // Every run ends at the end of its span, as one after the other would.
+            *fraction = starts.iter().fold(from, |f, s| f.max(s.2.1));
+            return Ok(fits);
         }
         starts
             .iter()
-            .map(|&(ci, c, sp)| self.run(ci, c, pause, fraction, sp))
+            .map(|(ci, c, sp)| self.run(*ci, c, pause, fraction, *sp))
             .collect()
     }
 
