@@ -673,6 +673,10 @@ pub fn limb_reset(world: &WorldSkeleton, chain: usize) -> Candidate {
             sk.bones[b].r1 = keep_r1;
         }
     }
+    // Through the world view and back, as the figures in the module docs were measured
+    // (`Skeleton::enforce_constraints` applies the same constraints with other roundings, and
+    // the fit that follows, chaotic in its start, then differs: 0.43% against 0.28% joint
+    // error on the 10k-point statue of `bench`).
     let mut w = WorldSkeleton::from_skeleton(&sk);
     w.enforce();
     Candidate {
