@@ -84,8 +84,9 @@
 //! order, so any sequence of budgets gives exactly the same skeleton, bit for bit, as an
 //! uninterrupted run on any number of threads. An uninterrupted run (a hook that
 //! [`Pause::never_pauses`]) registers the finalists at the same time, then the scale
-//! restarts, each with its own solver (`FullRun::run_all`): the same bytes, sooner (10k
-//! points on this 2-core machine: 22.2 s → 15.9 s).
+//! restarts, then the five starts of each refit round, each with its own solver
+//! (`FullRun::run_all`): the same bytes, sooner (10k points on this 2-core machine, before
+//! the limb resets: 22.2 s → 15.9 s).
 
 use super::assign::{AssignParams, Assignment};
 use super::init::{Candidate, Init, candidates, rescaled};

@@ -65,8 +65,8 @@ pub trait Pause {
 
     /// True when the hook never pauses, never cancels and reads nothing: the registration may
     /// then run independent solvers at the same time, each with a [`NoPause`] of its own
-    /// (the finalists, the scale restarts), and compute exactly what it computes one solver
-    /// after the other.
+    /// (the finalists, the scale restarts, the starts of a refit round), and compute exactly
+    /// what it computes one solver after the other.
     fn never_pauses(&self) -> bool {
         false
     }
