@@ -919,6 +919,19 @@ fn register_posed(s: &SynthStatue) -> pygmalion::fakir::Fit {
     .unwrap()
 }
 
+/// The automatic registration with default options, as `register` runs it.
+fn register_as_the_cli(s: &SynthStatue) -> pygmalion::fakir::Fit {
+    use pygmalion::fakir::{Registration, RegistrationOptions};
+    Registration::new(
+        std::sync::Arc::new(s.cloud.clone()),
+        s.truth.template.clone(),
+        RegistrationOptions::default(),
+    )
+    .unwrap()
+    .run_to_convergence()
+    .unwrap()
+}
+
 /// Joint error of a fit of a 1.7-high statue (printed with its mirrored error), asserting
 /// that left and right are not exchanged.
 fn unswapped_joint_error(fit: &Skeleton, truth: &Skeleton, what: &str) -> f32 {
@@ -1453,7 +1466,6 @@ fn a_statue_fitted_facing_backwards_before_is_fitted_facing_front() {
 }
 
 fn facing_registration() {
-    use pygmalion::fakir::{Registration, RegistrationOptions};
     // Two statues (6000 points, default options, as `register` runs them) fitted facing
     // backwards before the facing check and the untwisted joint ranges. Seed 30: joint error
     // 27.0% (10.0% with left and right exchanged) before; 2.76% after, the finalists' rule
@@ -1462,14 +1474,7 @@ fn facing_registration() {
     // their ranges.
     for (seed, limit) in [(30u64, 0.04f32), (49, 0.02)] {
         let s = posed_human(seed, 6_000);
-        let fit = Registration::new(
-            std::sync::Arc::new(s.cloud.clone()),
-            s.truth.template.clone(),
-            RegistrationOptions::default(),
-        )
-        .unwrap()
-        .run_to_convergence()
-        .unwrap();
+        let fit = register_as_the_cli(&s);
         let err = unswapped_joint_error(&fit.skeleton, &s.truth, &format!("seed {seed}"));
         assert!(err < limit, "seed {seed}: joint error {err}");
     }
@@ -1481,7 +1486,6 @@ fn a_fit_still_facing_backwards_after_the_refits_is_turned_around() {
 }
 
 fn second_facing_registration() {
-    use pygmalion::fakir::{Registration, RegistrationOptions};
     // `synth --seed 14 --rigid --height 1.7` (30k points), registered as `register` does.
     // Without the second facing check the fit ends facing backwards: joint error 21.8% of the
     // height (6.0% with left and right exchanged), implausibility 7.8 rad, two-sided score
@@ -1489,14 +1493,7 @@ fn second_facing_registration() {
     // outside the near-ties. Turned around after the refits it scores 0.0103 and ends at
     // 0.73%.
     let s = posed_human(14, 30_000);
-    let fit = Registration::new(
-        std::sync::Arc::new(s.cloud.clone()),
-        s.truth.template.clone(),
-        RegistrationOptions::default(),
-    )
-    .unwrap()
-    .run_to_convergence()
-    .unwrap();
+    let fit = register_as_the_cli(&s);
     let err = unswapped_joint_error(&fit.skeleton, &s.truth, "seed 14");
     assert!(err < 0.02, "seed 14: joint error {err}");
 }

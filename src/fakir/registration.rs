@@ -178,9 +178,10 @@ pub struct RegistrationOptions {
     pub limb_resets: bool,
     /// The second facing check (level 5 in the module docs): a fit that ends the refit
     /// rounds with an [`super::init::implausibility`] above this (radians) is turned around
-    /// and registered again through levels 0, 1 and the refit rounds; the lower two-sided
-    /// score wins. `f64::INFINITY`: never. Skipped, like the first, with a facing hint or a
-    /// given skeleton.
+    /// and registered again through levels 0, 1 and the refit rounds; the turned fit wins
+    /// only with both the lower two-sided score and the lower implausibility.
+    /// `f64::INFINITY`: never. Skipped, like the first, with a facing hint or a given
+    /// skeleton.
     pub recheck_facing_above: f64,
 }
 
@@ -710,8 +711,6 @@ impl FullRun<'_> {
         rr: &RefitRounds,
         iterations: &mut usize,
     ) -> Result<Solver<'p>> {
-        let full = self;
-        let opts = self.opts;
         let RefitRounds {
             reset_chains,
             rounds,
@@ -725,7 +724,7 @@ impl FullRun<'_> {
             let Some(hook) = s.take_pause() else { break };
             let start = s.world.clone();
             let mut fraction = s.activity.fraction;
-            let current = full.score(&start, start.block_scale, hook, fraction)?;
+            let current = self.score(&start, start.block_scale, hook, fraction)?;
             let c = Candidate {
                 skeleton: start.to_skeleton(),
                 scale: start.block_scale,
@@ -740,7 +739,7 @@ impl FullRun<'_> {
                 .enumerate()
                 .map(|(i, c)| (chosen, c, span(half.0, half.1, i, round_starts)))
                 .collect();
-            let mut runs = full.run_all(&starts, hook, &mut fraction)?;
+            let mut runs = self.run_all(&starts, hook, &mut fraction)?;
             let units: u64 = runs.iter().map(|r| r.units).sum();
             // The lowest score (ties to the earlier start: the plain refit first).
             let k = (0..runs.len())
@@ -749,11 +748,11 @@ impl FullRun<'_> {
             let r = runs.swap_remove(k);
             if r.score < current {
                 *iterations += r.iterations;
-                let (next, its) = full.level1(
+                let (next, its) = self.level1(
                     r.world,
                     start.block_scale,
                     s.units + units,
-                    opts.final_iterations,
+                    self.opts.final_iterations,
                     hook,
                     fraction,
                     (half.1, sp.1),
