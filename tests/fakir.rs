@@ -849,7 +849,7 @@ fn refits_lower_the_mean_distance_of_posed_statues() {
 }
 
 fn refits_comparison() {
-    use pygmalion::fakir::{Registration, RegistrationOptions};
+    use pygmalion::fakir::RegistrationOptions;
     // Refits (registration level 5, two rounds here, each with its limb resets) are kept
     // only when they lower the two-sided score. On these two statues (6000 points),
     // measured: seed 4 keeps its fit (mean distance 0.00870, joint error 4.68% either way);
@@ -859,18 +859,14 @@ fn refits_comparison() {
     for seed in [4u64, 20] {
         let s = posed_human(seed, 6_000);
         let fit = |refits: usize| {
-            Registration::new(
-                std::sync::Arc::new(s.cloud.clone()),
-                s.truth.template.clone(),
+            register_with(
+                &s,
                 RegistrationOptions {
                     subsample: 4_000,
                     refits,
                     ..Default::default()
                 },
             )
-            .unwrap()
-            .run_to_convergence()
-            .unwrap()
         };
         let (a, b) = (fit(2), fit(0));
         let (ea, eb) = (
@@ -905,27 +901,29 @@ fn refits_comparison() {
 
 /// The automatic registration of the posed-statue tests (level 0 on 4000 points).
 fn register_posed(s: &SynthStatue) -> pygmalion::fakir::Fit {
-    use pygmalion::fakir::{Registration, RegistrationOptions};
-    Registration::new(
-        std::sync::Arc::new(s.cloud.clone()),
-        s.truth.template.clone(),
-        RegistrationOptions {
+    register_with(
+        s,
+        pygmalion::fakir::RegistrationOptions {
             subsample: 4_000,
             ..Default::default()
         },
     )
-    .unwrap()
-    .run_to_convergence()
-    .unwrap()
 }
 
 /// The automatic registration with default options, as `register` runs it.
 fn register_as_the_cli(s: &SynthStatue) -> pygmalion::fakir::Fit {
-    use pygmalion::fakir::{Registration, RegistrationOptions};
-    Registration::new(
+    register_with(s, Default::default())
+}
+
+/// A synthetic statue registered with `opts`, run to convergence.
+fn register_with(
+    s: &SynthStatue,
+    opts: pygmalion::fakir::RegistrationOptions,
+) -> pygmalion::fakir::Fit {
+    pygmalion::fakir::Registration::new(
         std::sync::Arc::new(s.cloud.clone()),
         s.truth.template.clone(),
-        RegistrationOptions::default(),
+        opts,
     )
     .unwrap()
     .run_to_convergence()

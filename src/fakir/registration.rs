@@ -574,23 +574,15 @@ pub fn register(
     } else {
         1.0
     };
-    let (s, its) = full.level1(
-        world,
-        scale,
-        units0,
-        opts.final_iterations,
-        pause,
-        fraction,
-        span(level1_start, facing_start, 0, rounds),
-    )?;
-    iterations += its;
     let rr = RefitRounds {
         reset_chains: &reset_chains,
         rounds,
         chosen,
         span: (level1_start, facing_start),
     };
-    let mut s = full.refit_rounds(s, &rr, &mut iterations)?;
+    let level1_span = span(level1_start, facing_start, 0, rounds);
+    let (mut s, its) = full.refine(world, scale, units0, pause, fraction, level1_span, &rr)?;
+    iterations += its;
     // The second facing check (see the module docs).
     let implausible = super::init::implausibility(&s.world.to_skeleton());
     if recheck
@@ -614,17 +606,16 @@ pub fn register(
         let half = (first.0, 0.5 * (first.0 + first.1));
         let mut fraction = facing_start;
         let r = full.run(chosen, &c, hook, &mut fraction, half)?;
-        let (t, its) = full.level1(
+        let (mut t, its) = full.refine(
             r.world,
             scale,
             s.units + r.units,
-            opts.final_iterations,
             hook,
             fraction,
             (half.1, first.1),
+            &rt,
         )?;
-        let mut its = r.iterations + its;
-        let mut t = full.refit_rounds(t, &rt, &mut its)?;
+        let its = r.iterations + its;
         // (The refit rounds end with the hook in the solver they return.)
         if let Some(hook) = t.take_pause() {
             let fraction = t.activity.fraction;
@@ -703,6 +694,33 @@ struct RefitRounds<'a> {
 }
 
 impl FullRun<'_> {
+    /// Level 1 from the level-0 fit `world` (progress in `level1_span`), then the refit rounds
+    /// of `rr` (level 5 in the module docs): the fit they end with and the whole-skeleton
+    /// iterations run.
+    #[allow(clippy::too_many_arguments)]
+    fn refine<'p>(
+        &self,
+        world: WorldSkeleton,
+        scale: f32,
+        units: u64,
+        pause: &'p mut dyn Pause,
+        fraction: f32,
+        level1_span: (f32, f32),
+        rr: &RefitRounds,
+    ) -> Result<(Solver<'p>, usize)> {
+        let (s, mut iterations) = self.level1(
+            world,
+            scale,
+            units,
+            self.opts.final_iterations,
+            pause,
+            fraction,
+            level1_span,
+        )?;
+        let s = self.refit_rounds(s, rr, &mut iterations)?;
+        Ok((s, iterations))
+    }
+
     /// The refit rounds (level 5 in the module docs) from the level-1 fit `s`: returns the
     /// fit they end with, adding their iterations to `iterations`.
     fn refit_rounds<'p>(
