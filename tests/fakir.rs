@@ -1143,8 +1143,55 @@ fn lost_limbs_registration() {
         (27, "r_upper_arm", 0.3, ARM, &["r_upper_arm"]),
     ];
     for (seed, bone, at, must, may) in cases {
-        let s = cut_human(seed, 6_000, &[(bone, at)]);
-        let fit = register_posed(&s);
+        check_lost_case(seed, (bone, at), must, may, 6_000, register_posed);
+    }
+}
+
+#[test]
+fn limb_bones_folded_onto_a_stump_or_into_the_trunk_are_found_lost() {
+    on_one_thread(starved_limbs_registration);
+}
+
+fn starved_limbs_registration() {
+    // Registration level 6, starved subtrees: the bones below a cut that FAKIR folds back onto
+    // the stump (seed 48, a left leg cut through the shin: the foot) or lays into the trunk
+    // (seed 47, a right arm cut through the upper arm: the forearm and hand) take a few
+    // points that the stump or the trunk explains nearly as well, but not within a quarter
+    // of the bone's radius. With a quarter of the points of their mirror's subtree, they are
+    // lost within half the radius (`STARVED`, `STARVED_REDUNDANT`). Default options, 30k
+    // points, as the CLI runs them. Measured when written: before the starved bound, neither
+    // was found (removal excess 0.34 and 0.29 of the radius).
+    let cases: [(u64, &str, f32, &[&str], &[&str]); 2] = [
+        (48, "l_shin", 0.4, &["l_foot"], &["l_shin"]),
+        (
+            47,
+            "r_upper_arm",
+            0.3,
+            &["r_forearm", "r_hand"],
+            &["r_upper_arm"],
+        ),
+    ];
+    for (seed, bone, at, must, may) in cases {
+        check_lost_case(seed, (bone, at), must, may, 30_000, register_as_the_cli);
+    }
+}
+
+/// Registers a statue cut at `cut` (bone, fraction) with `register` and checks level 6: the
+/// bones of `must` are reported lost, nothing outside `must` and `may` is; no point goes to a
+/// lost bone; a lost bone gets its healthy mirror's length; the joints the scan still has
+/// stay within 3% of the height; the lost bones of `must` are bare on the completed
+/// skeleton.
+fn check_lost_case(
+    seed: u64,
+    (bone, at): (&str, f32),
+    must: &[&str],
+    may: &[&str],
+    points: usize,
+    register: fn(&SynthStatue) -> pygmalion::fakir::Fit,
+) {
+    {
+        let s = cut_human(seed, points, &[(bone, at)]);
+        let fit = register(&s);
         let t = &fit.skeleton.template;
         let lost: Vec<&str> = (0..t.bones.len())
             .filter(|&b| fit.missing[b])
