@@ -1135,9 +1135,7 @@ fn lost_limbs_registration() {
     // and 3 more came out 5–7% off with a wrong lost set; the lost set is right whenever the
     // fit is (these three, and seed 26's arm).
     const ARM: &[&str] = &["r_forearm", "r_hand"];
-    // (seed, bone cut, where, bones that must be lost, bones that may be)
-    type Case<'a> = (u64, &'a str, f32, &'a [&'a str], &'a [&'a str]);
-    let cases: [Case; 3] = [
+    let cases: [LostCase; 3] = [
         (21, "r_upper_arm", 0.3, ARM, &["r_upper_arm"]),
         (21, "l_shin", 0.3, &["l_foot"], &["l_shin"]),
         (27, "r_upper_arm", 0.3, ARM, &["r_upper_arm"]),
@@ -1161,7 +1159,7 @@ fn starved_limbs_registration() {
     // lost within half the radius (`STARVED`, `STARVED_REDUNDANT`). Default options, 30k
     // points, as the CLI runs them. Measured when written: before the starved bound, neither
     // was found (removal excess 0.34 and 0.29 of the radius).
-    let cases: [(u64, &str, f32, &[&str], &[&str]); 2] = [
+    let cases: [LostCase; 2] = [
         (48, "l_shin", 0.4, &["l_foot"], &["l_shin"]),
         (
             47,
@@ -1176,6 +1174,9 @@ fn starved_limbs_registration() {
     }
 }
 
+/// A lost-limb case: seed, bone cut, where along it, bones that must be lost, bones that may be.
+type LostCase<'a> = (u64, &'a str, f32, &'a [&'a str], &'a [&'a str]);
+
 /// Registers a statue cut at `cut` (bone, fraction) with `register` and checks level 6: the
 /// bones of `must` are reported lost, nothing outside `must` and `may` is; no point goes to a
 /// lost bone; a lost bone gets its healthy mirror's length; the joints the scan still has
@@ -1189,71 +1190,69 @@ fn check_lost_case(
     points: usize,
     register: fn(&SynthStatue) -> pygmalion::fakir::Fit,
 ) {
-    {
-        let s = cut_human(seed, points, &[(bone, at)]);
-        let fit = register(&s);
-        let t = &fit.skeleton.template;
-        let lost: Vec<&str> = (0..t.bones.len())
-            .filter(|&b| fit.missing[b])
-            .map(|b| t.bones[b].name.as_str())
-            .collect();
-        // The joints the scan still has: those not at the far end of a cut bone.
-        let (fj, tj) = (fit.skeleton.pose().joints, s.truth.pose().joints);
-        let gone: Vec<usize> = must
-            .iter()
-            .chain(may)
-            .map(|n| t.bone_index(n).unwrap())
-            .collect();
-        let present: Vec<usize> = (0..t.joints.len())
-            .filter(|&j| {
-                !gone
-                    .iter()
-                    .any(|&b| (s.truth.pose().bones[b].c2 - tj[j]).length() < 1e-6)
-            })
-            .collect();
-        let err = present
-            .iter()
-            .map(|&j| (fj[j] - tj[j]).length())
-            .sum::<f32>()
-            / present.len() as f32
-            / 1.7;
-        println!(
-            "seed {seed}, {bone} cut at {at}: lost {lost:?}, joint error of the {} joints left {:.2}%",
-            present.len(),
-            100.0 * err
+    let s = cut_human(seed, points, &[(bone, at)]);
+    let fit = register(&s);
+    let t = &fit.skeleton.template;
+    let lost: Vec<&str> = (0..t.bones.len())
+        .filter(|&b| fit.missing[b])
+        .map(|b| t.bones[b].name.as_str())
+        .collect();
+    // The joints the scan still has: those not at the far end of a cut bone.
+    let (fj, tj) = (fit.skeleton.pose().joints, s.truth.pose().joints);
+    let gone: Vec<usize> = must
+        .iter()
+        .chain(may)
+        .map(|n| t.bone_index(n).unwrap())
+        .collect();
+    let present: Vec<usize> = (0..t.joints.len())
+        .filter(|&j| {
+            !gone
+                .iter()
+                .any(|&b| (s.truth.pose().bones[b].c2 - tj[j]).length() < 1e-6)
+        })
+        .collect();
+    let err = present
+        .iter()
+        .map(|&j| (fj[j] - tj[j]).length())
+        .sum::<f32>()
+        / present.len() as f32
+        / 1.7;
+    println!(
+        "seed {seed}, {bone} cut at {at}: lost {lost:?}, joint error of the {} joints left {:.2}%",
+        present.len(),
+        100.0 * err
+    );
+    for m in must {
+        assert!(
+            lost.contains(m),
+            "seed {seed}: {m} not found lost: {lost:?}"
         );
-        for m in must {
+    }
+    for l in &lost {
+        assert!(
+            must.contains(l) || may.contains(l),
+            "seed {seed}: {l} wrongly lost: {lost:?}"
+        );
+    }
+    for (b, m) in fit.missing.iter().enumerate() {
+        if *m {
+            assert_eq!(fit.bone_counts[b], 0, "a lost bone took points");
+            let mirror = pygmalion::fakir::support::mirrors(t)[b].unwrap();
+            let (a, c) = (&fit.skeleton.bones[b], &fit.skeleton.bones[mirror]);
             assert!(
-                lost.contains(m),
-                "seed {seed}: {m} not found lost: {lost:?}"
+                (a.length - c.length).abs() < 1e-4 * c.length.max(1e-6),
+                "{}: length {} against its mirror's {}",
+                t.bones[b].name,
+                a.length,
+                c.length
             );
         }
-        for l in &lost {
-            assert!(
-                must.contains(l) || may.contains(l),
-                "seed {seed}: {l} wrongly lost: {lost:?}"
-            );
-        }
-        for (b, m) in fit.missing.iter().enumerate() {
-            if *m {
-                assert_eq!(fit.bone_counts[b], 0, "a lost bone took points");
-                let mirror = pygmalion::fakir::support::mirrors(t)[b].unwrap();
-                let (a, c) = (&fit.skeleton.bones[b], &fit.skeleton.bones[mirror]);
-                assert!(
-                    (a.length - c.length).abs() < 1e-4 * c.length.max(1e-6),
-                    "{}: length {} against its mirror's {}",
-                    t.bones[b].name,
-                    a.length,
-                    c.length
-                );
-            }
-        }
-        assert!(err < 0.03, "seed {seed}: joint error {err}");
-        // The support of the completed skeleton: the lost bones below the cut are bare.
-        for m in must {
-            let sup = &fit.support[t.bone_index(m).unwrap()];
-            assert!(sup.coverage < 0.4, "{m}: coverage {}", sup.coverage);
-        }
+    }
+    assert!(err < 0.03, "seed {seed}: joint error {err}");
+    // The support of the completed skeleton: the lost bones below the cut are bare.
+    for m in must {
+        let sup = &fit.support[t.bone_index(m).unwrap()];
+        assert!(sup.coverage < 0.4, "{m}: coverage {}", sup.coverage);
     }
 }
 
