@@ -540,14 +540,7 @@ pub fn register(
     }
     // The facing check (see the module docs): the fit turned around, registered again.
     if opts.front.is_none() && !matches!(opts.init, Init::Given(_)) {
-        let mut turned = best.world.turned_around(&mirrors(&template)).to_skeleton();
-        if any_given {
-            collapse(&mut turned, &given_lost);
-        }
-        let c = Candidate {
-            skeleton: turned,
-            scale: best.scale,
-        };
+        let c = full.turned(&best.world, best.scale);
         let sp = span(finalists_start, level1_start, runs - 1, runs);
         let r = full.run(chosen, &c, pause, &mut fraction, sp)?;
         let mut pair = vec![best, r];
@@ -593,14 +586,7 @@ pub fn register(
         && let Some(hook) = s.take_pause()
     {
         let kept = full.score(&s.world, s.world.block_scale, hook, facing_start)?;
-        let mut turned = s.world.turned_around(&mirrors(&template)).to_skeleton();
-        if any_given {
-            collapse(&mut turned, &given_lost);
-        }
-        let c = Candidate {
-            skeleton: turned,
-            scale: s.world.block_scale,
-        };
+        let c = full.turned(&s.world, s.world.block_scale);
         let rt = RefitRounds {
             span: (facing_start, 1.0),
             ..rr
@@ -697,6 +683,14 @@ struct RefitRounds<'a> {
 }
 
 impl FullRun<'_> {
+    /// The start of a facing check (levels 3 and 5 in the module docs): `world` turned around
+    /// ([`WorldSkeleton::turned_around`]) at `scale`, its known-lost bones collapsed.
+    fn turned(&self, world: &WorldSkeleton, scale: f32) -> Candidate {
+        let mut skeleton = world.turned_around(&mirrors(&world.template)).to_skeleton();
+        collapse(&mut skeleton, self.lost);
+        Candidate { skeleton, scale }
+    }
+
     /// Level 1 from the level-0 fit `world` (progress in `level1_span`), then the refit rounds
     /// of `rr` (level 5 in the module docs): the fit they end with and the whole-skeleton
     /// iterations run.
@@ -889,12 +883,12 @@ fn examine_support(
 /// part-way through a limb (30k points, seeds 40–59) the lost set came out right on 17
 /// instead of 14; on 32 complete ones it also took seed 15's right hand, which the fit had
 /// laid off the statue (a fifth of its mirror's points, no support; completed from the left
-/// one, its joint error went from 5.6% to 6.8%), besides the hands of
-/// seeds 10 and 12 the redundancy bound already took. Support alone is not enough: on real
-/// scans a fitted bone thicker than a draped limb, a foot on a plinth set aside, or a hand that
-/// FAKIR shrank, has little coverage but points of its own that nothing else explains
-/// (measured on `../shared/data`: the feet of Theodoric, Zenobia and Maria, the Faun's left
-/// arm and hand). One work unit per bone.
+/// one, its joint error went from 5.6% to 6.8%), besides the hands of seeds 10 and 12 the
+/// redundancy bound already took. Support alone is not enough: on real scans a fitted bone
+/// thicker than a draped limb, a foot on a plinth set aside, or a hand that FAKIR shrank,
+/// has little coverage but points of its own that nothing else explains (measured on
+/// `../shared/data`: the feet of Theodoric, Zenobia and Maria, the Faun's left arm and
+/// hand). One work unit per bone.
 fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result<Vec<bool>> {
     let t = s.world.template.clone();
     let trunk = super::solver::trunk_bones(&t);
