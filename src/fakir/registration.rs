@@ -69,6 +69,21 @@
 //!    `../shared/data` it turned TOSCA *Michael 1*, fitted facing backwards before (7.2 →
 //!    2.5 rad), and kept six fits whose turned versions scored lower but bent further out of
 //!    range.
+//!
+//!    **Crossed-limbs check** (our choice; option `uncross`, skipped from a given skeleton):
+//!    a fit in which a pair of mirrored limb bones is crossed
+//!    ([`WorldSkeleton::most_crossed`]: exchanging the two bones' ends would make them
+//!    shorter, as it always does for segments that intersect) has laid each limb's lower
+//!    part on the other limb — a thigh from its hip to the other knee. Limbs do not pass
+//!    through one another, and every refit keeps the crossing: a limb reset puts one leg
+//!    back at rest while the other still holds its points. The most crossed pair's lower
+//!    limbs are exchanged ([`WorldSkeleton::exchanged_below`]: each of the two bones reaches
+//!    to the other's end, what hangs below takes its mirror's place and sizes) and that
+//!    start goes through level 0, level 1 and the refit rounds; it replaces the fit when it
+//!    has the lower two-sided score on the level-0 points. The score alone decides: the
+//!    crossing is the implausible thing, and exchanging the lower limbs leaves the joints'
+//!    ranges nearly as they were. No true skeleton of the generator's statues has a crossed
+//!    pair (the lowest ratio of exchanged to straight lengths over 72 of them: 1.1).
 //! 6. **Lost limbs** (our choice; option `missing`): the papers note that FAKIR "cannot
 //!    predict the right length or angle" of a bone whose data is missing (thesis §2.5.1);
 //!    in practice the bones of a cut limb fold back onto the stump or wander onto other
@@ -186,6 +201,12 @@ pub struct RegistrationOptions {
     /// `f64::INFINITY`: never. Skipped, like the first, with a facing hint or a given
     /// skeleton.
     pub recheck_facing_above: f64,
+    /// The crossed-limbs check (level 5 in the module docs): a fit with a pair of crossed
+    /// mirrored limb bones ([`WorldSkeleton::most_crossed`]) is registered again with the
+    /// limbs below them exchanged ([`WorldSkeleton::exchanged_below`]) through levels 0, 1
+    /// and the refit rounds; the uncrossed fit wins with the lower two-sided score. Skipped
+    /// from a given skeleton.
+    pub uncross: bool,
 }
 
 impl Default for RegistrationOptions {
@@ -209,6 +230,7 @@ impl Default for RegistrationOptions {
             front: None,
             limb_resets: true,
             recheck_facing_above: 3.0,
+            uncross: true,
         }
     }
 }
@@ -561,65 +583,68 @@ pub fn register(
     } else {
         Vec::new()
     };
-    // The second facing check, when it may run, gets the second half of what follows level 0.
+    // The checks that follow the refit rounds (the second facing check, the crossed-limbs
+    // check), when they may run, share the second half of what follows level 0.
     let recheck = opts.front.is_none()
         && !matches!(opts.init, Init::Given(_))
         && opts.recheck_facing_above.is_finite();
-    let facing_start = if recheck {
+    let uncross = opts.uncross && !matches!(opts.init, Init::Given(_));
+    let checks_start = if recheck || uncross {
         0.5 * (level1_start + 1.0)
     } else {
         1.0
+    };
+    let checks_mid = if recheck && uncross {
+        0.5 * (checks_start + 1.0)
+    } else if recheck {
+        1.0
+    } else {
+        checks_start
     };
     let rr = RefitRounds {
         reset_chains: &reset_chains,
         rounds,
         chosen,
-        span: (level1_start, facing_start),
+        span: (level1_start, checks_start),
     };
-    let level1_span = span(level1_start, facing_start, 0, rounds);
+    let level1_span = span(level1_start, checks_start, 0, rounds);
     let (mut s, its) = full.refine(world, scale, units0, pause, fraction, level1_span, &rr)?;
     iterations += its;
-    // The second facing check (see the module docs).
+    // The second facing check (see the module docs): the turned fit wins with both the
+    // lower score and the lower implausibility.
     let implausible = super::init::implausibility(&s.world.to_skeleton());
-    if recheck
-        && implausible > opts.recheck_facing_above
-        && let Some(hook) = s.take_pause()
-    {
-        let kept = full.score(&s.world, s.world.block_scale, hook, facing_start)?;
+    if recheck && implausible > opts.recheck_facing_above {
         let c = full.turned(&s.world, s.world.block_scale);
-        let rt = RefitRounds {
-            span: (facing_start, 1.0),
-            ..rr
-        };
-        let first = span(facing_start, 1.0, 0, rounds);
-        let half = (first.0, 0.5 * (first.0 + first.1));
-        let mut fraction = facing_start;
-        let r = full.run(chosen, &c, hook, &mut fraction, half)?;
-        let (mut t, its) = full.refine(
-            r.world,
+        let ch = Challenge {
+            start: &c,
             scale,
-            s.units + r.units,
-            hook,
-            fraction,
-            (half.1, first.1),
-            &rt,
-        )?;
-        let its = r.iterations + its;
-        // (The refit rounds end with the hook in the solver they return.)
-        if let Some(hook) = t.take_pause() {
-            let fraction = t.activity.fraction;
-            let other = full.score(&t.world, t.world.block_scale, hook, fraction)?;
-            let other_implausible = super::init::implausibility(&t.world.to_skeleton());
-            if other < kept && other_implausible < implausible {
-                t.give_pause(hook);
-                iterations += its;
-                s = t;
-            } else {
-                s.units = t.units;
-                s.activity.fraction = fraction;
-                s.give_pause(hook);
-            }
-        }
+            rr: &rr,
+            span: (checks_start, checks_mid),
+        };
+        s = full.challenge(s, &ch, &mut iterations, |kept, other, t| {
+            other < kept && super::init::implausibility(&t.to_skeleton()) < implausible
+        })?;
+    }
+    // The crossed-limbs check (see the module docs): the limbs below the most crossed pair
+    // exchanged; the uncrossed fit wins with the lower score.
+    let mirror = mirrors(&template);
+    if uncross
+        && let Some(b) = s.world.most_crossed(&mirror, &given_lost)
+        && let Some(w) = s.world.exchanged_below(b, &mirror)
+    {
+        let mut skeleton = w.to_skeleton();
+        collapse(&mut skeleton, &given_lost);
+        let c = Candidate {
+            skeleton,
+            scale: s.world.block_scale,
+        };
+        let ch = Challenge {
+            start: &c,
+            scale,
+            rr: &rr,
+            span: (checks_mid, 1.0),
+        };
+        s = full.challenge(s, &ch, &mut iterations, |kept, other, _| other < kept)?;
     }
     s.refresh().map_err(cancelled)?;
     // Missing limbs (level 6): those known, and those found when `missing` is on.
@@ -682,6 +707,18 @@ struct RefitRounds<'a> {
     span: (f32, f32),
 }
 
+/// A challenger to a finished fit ([`FullRun::challenge`]).
+struct Challenge<'a> {
+    /// Its start.
+    start: &'a Candidate,
+    /// The scale its level 1 and refit rounds run at (the level-0 fit's).
+    scale: f32,
+    /// The refit rounds it goes through (their span replaced by `span`).
+    rr: &'a RefitRounds<'a>,
+    /// Its progress span.
+    span: (f32, f32),
+}
+
 impl FullRun<'_> {
     /// The start of a facing check (levels 3 and 5 in the module docs): `world` turned around
     /// ([`WorldSkeleton::turned_around`]) at `scale`, its known-lost bones collapsed.
@@ -716,6 +753,57 @@ impl FullRun<'_> {
         )?;
         let s = self.refit_rounds(s, rr, &mut iterations)?;
         Ok((s, iterations))
+    }
+
+    /// A **challenger** to the fit `s` (the checks of level 5 in the module docs): `ch.start`
+    /// registered through level 0, level 1 and the refit rounds of `ch.rr`, its progress in
+    /// `ch.span`. Returns the challenger's solver when `wins(kept, other, challenger)` says so
+    /// (`kept` and `other`: the two-sided scores of the fit and the challenger on the level-0
+    /// points), adding its iterations to `iterations`; otherwise `s`, as it was.
+    fn challenge<'p>(
+        &self,
+        mut s: Solver<'p>,
+        ch: &Challenge,
+        iterations: &mut usize,
+        wins: impl Fn(f64, f64, &WorldSkeleton) -> bool,
+    ) -> Result<Solver<'p>> {
+        let Some(hook) = s.take_pause() else {
+            return Ok(s);
+        };
+        let (lo, hi) = ch.span;
+        let kept = self.score(&s.world, s.world.block_scale, hook, lo)?;
+        let rr = RefitRounds {
+            span: ch.span,
+            ..*ch.rr
+        };
+        let first = span(lo, hi, 0, rr.rounds);
+        let half = (first.0, 0.5 * (first.0 + first.1));
+        let mut fraction = lo;
+        let r = self.run(rr.chosen, ch.start, hook, &mut fraction, half)?;
+        let (mut t, its) = self.refine(
+            r.world,
+            ch.scale,
+            s.units + r.units,
+            hook,
+            fraction,
+            (half.1, first.1),
+            &rr,
+        )?;
+        let its = r.iterations + its;
+        // (The refit rounds end with the hook in the solver they return.)
+        if let Some(hook) = t.take_pause() {
+            let fraction = t.activity.fraction;
+            let other = self.score(&t.world, t.world.block_scale, hook, fraction)?;
+            if wins(kept, other, &t.world) {
+                t.give_pause(hook);
+                *iterations += its;
+                return Ok(t);
+            }
+            s.units = t.units;
+            s.activity.fraction = fraction;
+            s.give_pause(hook);
+        }
+        Ok(s)
     }
 
     /// The refit rounds (level 5 in the module docs) from the level-1 fit `s`: returns the

@@ -262,6 +262,80 @@ impl WorldSkeleton {
         self.rebuilt(self.root_rotation, &vec![None; self.template.bones.len()])
     }
 
+    /// The most **crossed** pair of mirrored limb bones (`mirror`, see
+    /// [`crate::fakir::support::mirrors`]), by the lower index of the two, or `None`. Two bones
+    /// `a`, `b` starting at different joints are crossed when exchanging their ends makes them
+    /// shorter: `|a.c1 − b.c2| + |b.c1 − a.c2| < |a| + |b|` (segments that intersect always
+    /// are, by the triangle inequality); the most crossed has the lowest ratio of the two
+    /// sums. Only free bones are examined, and pairs whose subtrees hold a bone of `skip` (known
+    /// lost, collapsed) are left out. A fit with crossed bones has laid each limb's lower part
+    /// on the other limb (a thigh from its hip to the other knee): limbs do not pass through
+    /// one another, and no synthetic statue's true skeleton has such a pair.
+    pub fn most_crossed(&self, mirror: &[Option<usize>], skip: &[bool]) -> Option<usize> {
+        let t = &self.template;
+        let posed = self.pose();
+        let skipped = |b: usize| t.subtree(b).iter().any(|&i| skip[i]);
+        let mut best: Option<(usize, f32)> = None;
+        for (a, def) in t.bones.iter().enumerate() {
+            let Some(b) = mirror[a] else { continue };
+            if b <= a
+                || def.kind != BoneKind::Free
+                || t.bones[b].kind != BoneKind::Free
+                || def.from == t.bones[b].from
+                || skipped(a)
+                || skipped(b)
+            {
+                continue;
+            }
+            let (p, q) = (posed.bones[a], posed.bones[b]);
+            let straight = self.lengths[a] + self.lengths[b];
+            let exchanged = (p.c1 - q.c2).length() + (q.c1 - p.c2).length();
+            if straight <= 0.0 || !exchanged.is_finite() || exchanged >= straight {
+                continue;
+            }
+            let ratio = exchanged / straight;
+            if best.is_none_or(|(_, r)| ratio < r) {
+                best = Some((a, ratio));
+            }
+        }
+        best.map(|(a, _)| a)
+    }
+
+    /// The skeleton with the limbs below the mirrored bones `a` and `mirror[a]` exchanged
+    /// (the start that uncrosses a pair found by [`WorldSkeleton::most_crossed`]): each of the
+    /// two bones keeps its first joint and reaches to the other's end (its end radius with
+    /// it), and every bone below takes its mirror's direction, length and radii, its frame
+    /// swung minimally from rest relative to its new parent (as in
+    /// [`WorldSkeleton::turned_around`]). Everything else is unchanged. `None` when `a` has no
+    /// mirror or a bone below has none.
+    pub fn exchanged_below(&self, a: usize, mirror: &[Option<usize>]) -> Option<WorldSkeleton> {
+        let b = mirror[a]?;
+        let t = self.template.clone();
+        let posed = self.pose();
+        let mut out = self.clone();
+        for (top, other) in [(a, b), (b, a)] {
+            out.aim(top, posed.bones[top].c1, posed.bones[other].c2);
+            out.r2[top] = self.r2[other];
+            for i in t.subtree(top).into_iter().skip(1) {
+                let m = mirror[i]?;
+                out.lengths[i] = self.lengths[m];
+                out.r1[i] = self.r1[m];
+                out.r2[i] = self.r2[m];
+                let parent = t.bones[i]
+                    .parent
+                    .map_or(out.root_rotation, |p| out.frames[p]);
+                let base = parent * self.rest_relative[i];
+                let axis = base * Vec3::X;
+                let d = (posed.bones[m].c2 - posed.bones[m].c1)
+                    .try_normalize()
+                    .unwrap_or(axis);
+                out.frames[i] = (crate::geometry::frames::rotation_arc(axis, d) * base).normalize();
+            }
+        }
+        out.enforce();
+        Some(out)
+    }
+
     /// The skeleton with root rotation `root`, each bone `i` taking the direction, length and
     /// radii of bone `mirror[i]` (itself when `None`), free frames swung minimally from rest.
     fn rebuilt(&self, root: Quat, mirror: &[Option<usize>]) -> WorldSkeleton {
