@@ -207,6 +207,12 @@ pub struct RegistrationOptions {
     /// and the refit rounds; the uncrossed fit wins with the lower two-sided score. Skipped
     /// from a given skeleton.
     pub uncross: bool,
+    /// The folded-limbs check (level 5 in the module docs): a fit with a joint inside a
+    /// chain folded back further than [`FOLDED`] ([`WorldSkeleton::most_folded`]) is
+    /// registered again with the chain below it laid straight
+    /// ([`WorldSkeleton::unfolded`]) through levels 0, 1 and the refit rounds; the unfolded
+    /// fit wins with the lower two-sided score. Skipped from a given skeleton.
+    pub unfold: bool,
 }
 
 impl Default for RegistrationOptions {
@@ -231,6 +237,7 @@ impl Default for RegistrationOptions {
             limb_resets: true,
             recheck_facing_above: 3.0,
             uncross: true,
+            unfold: true,
         }
     }
 }
@@ -589,17 +596,18 @@ pub fn register(
         && !matches!(opts.init, Init::Given(_))
         && opts.recheck_facing_above.is_finite();
     let uncross = opts.uncross && !matches!(opts.init, Init::Given(_));
-    let checks_start = if recheck || uncross {
+    let unfold = opts.unfold && !matches!(opts.init, Init::Given(_));
+    // Each check that may run gets an equal share of that half, in this order.
+    let checks = [recheck, uncross, unfold];
+    let ran = checks.iter().filter(|&&c| c).count();
+    let checks_start = if ran > 0 {
         0.5 * (level1_start + 1.0)
     } else {
         1.0
     };
-    let checks_mid = if recheck && uncross {
-        0.5 * (checks_start + 1.0)
-    } else if recheck {
-        1.0
-    } else {
-        checks_start
+    let check_span = |k: usize| {
+        let i = checks[..k].iter().filter(|&&c| c).count();
+        span(checks_start, 1.0, i, ran.max(1))
     };
     let rr = RefitRounds {
         reset_chains: &reset_chains,
@@ -619,7 +627,7 @@ pub fn register(
             start: &c,
             scale,
             rr: &rr,
-            span: (checks_start, checks_mid),
+            span: check_span(0),
         };
         s = full.challenge(s, &ch, &mut iterations, |kept, other, t| {
             other < kept && super::init::implausibility(&t.to_skeleton()) < implausible
@@ -642,7 +650,28 @@ pub fn register(
             start: &c,
             scale,
             rr: &rr,
-            span: (checks_mid, 1.0),
+            span: check_span(1),
+        };
+        s = full.challenge(s, &ch, &mut iterations, |kept, other, _| other < kept)?;
+    }
+    // The folded-limbs check (see the module docs): the chain below the most folded joint
+    // laid straight; the unfolded fit wins with the lower score.
+    let mut skip = super::solver::trunk_bones(&template);
+    for (k, l) in skip.iter_mut().zip(&given_lost) {
+        *k |= *l;
+    }
+    if unfold && let Some(a) = s.world.most_folded(&skip, FOLDED.to_radians()) {
+        let mut skeleton = s.world.unfolded(a).to_skeleton();
+        collapse(&mut skeleton, &given_lost);
+        let c = Candidate {
+            skeleton,
+            scale: s.world.block_scale,
+        };
+        let ch = Challenge {
+            start: &c,
+            scale,
+            rr: &rr,
+            span: check_span(2),
         };
         s = full.challenge(s, &ch, &mut iterations, |kept, other, _| other < kept)?;
     }
@@ -1115,6 +1144,12 @@ fn preferred(fits: &[FullFit]) -> usize {
         .map(|(i, _)| i)
         .expect("at least one fit")
 }
+
+/// The fold (degrees between two consecutive bones' directions) beyond which the
+/// folded-limbs check runs ([`RegistrationOptions::unfold`]). The built-in human's joint
+/// ranges bend a limb by at most 125° (the elbow's 120° and its 5° swing); the generator's
+/// statues, posed within them, reach 122° at most over 72 seeds.
+pub const FOLDED: f32 = 150.0;
 
 /// Near-ties of two-sided scores (factor) that anatomy decides ([`preferred`]).
 const NEAR_TIE: f64 = 1.5;

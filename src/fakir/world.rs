@@ -336,6 +336,70 @@ impl WorldSkeleton {
         Some(out)
     }
 
+    /// The most **folded** joint inside a chain: the bone `a`, by index, whose child `b` in
+    /// the same chain turns back from `a`'s direction by more than `limit` radians (the angle
+    /// between the two directions), the largest such angle first, or `None`. Free bones only;
+    /// bones of `skip` (trunk bones, known-lost bones) and their chain children are left out.
+    /// A fit folded this way has stretched `a` over the limb below it and laid `b` back
+    /// along it (an upper arm from the shoulder to the hand, the forearm back to the elbow).
+    pub fn most_folded(&self, skip: &[bool], limit: f32) -> Option<usize> {
+        let t = &self.template;
+        let mut best: Option<(usize, f32)> = None;
+        for (b, def) in t.bones.iter().enumerate() {
+            let Some(a) = def.parent else { continue };
+            let same_chain =
+                def.chain.is_some() && def.chain.map(|c| c.0) == t.bones[a].chain.map(|c| c.0);
+            if !same_chain
+                || def.kind != BoneKind::Free
+                || t.bones[a].kind != BoneKind::Free
+                || skip[a]
+                || skip[b]
+                || self.lengths[a] <= 0.0
+                || self.lengths[b] <= 0.0
+            {
+                continue;
+            }
+            let (u, v) = (self.frames[a] * Vec3::X, self.frames[b] * Vec3::X);
+            let angle = u.dot(v).clamp(-1.0, 1.0).acos();
+            if angle > limit && best.is_none_or(|(_, g)| angle > g) {
+                best = Some((a, angle));
+            }
+        }
+        best.map(|(a, _)| a)
+    }
+
+    /// The skeleton with the chain from bone `a` to its end **unfolded** (the start that
+    /// undoes a fold found by [`WorldSkeleton::most_folded`]): those bones laid in a straight
+    /// line along `a`'s direction, from `a`'s first joint to `a`'s end (the reach the fit
+    /// found), their lengths in the template's rest proportions; each frame is swung
+    /// minimally onto the line; radii and everything else unchanged.
+    pub fn unfolded(&self, a: usize) -> WorldSkeleton {
+        let t = self.template.clone();
+        let mut out = self.clone();
+        let Some(chain) = t.bones[a].chain.map(|c| c.0) else {
+            return out;
+        };
+        let bones = &t.chains[chain].bones;
+        let Some(k) = bones.iter().position(|&b| b == a) else {
+            return out;
+        };
+        let line = &bones[k..];
+        let rest: f32 = line.iter().map(|&b| self.rest_lengths[b]).sum();
+        if rest <= 0.0 {
+            return out;
+        }
+        let reach = self.lengths[a];
+        let d = self.frames[a] * Vec3::X;
+        for &b in line {
+            out.lengths[b] = reach * self.rest_lengths[b] / rest;
+            let axis = out.frames[b] * Vec3::X;
+            out.frames[b] =
+                (crate::geometry::frames::rotation_arc(axis, d) * out.frames[b]).normalize();
+        }
+        out.enforce();
+        out
+    }
+
     /// The skeleton with root rotation `root`, each bone `i` taking the direction, length and
     /// radii of bone `mirror[i]` (itself when `None`), free frames swung minimally from rest.
     fn rebuilt(&self, root: Quat, mirror: &[Option<usize>]) -> WorldSkeleton {
