@@ -104,7 +104,12 @@
 //!    Measured (`synth --seed N --rigid --height 1.7`, 30k points): on seeds 1–32 the
 //!    crossing check ran on seed 13 (crossed shins; joint error 6.45% → 0.89%) and the
 //!    folding check on seeds 12 (3.34% → 0.96%) and 25 (4.48% → 1.21%): under 2% 25 → 28,
-//!    under 5% 30 → 31, mean 1.52% → 1.17%. HELD_OUT
+//!    under 5% 30 → 31, mean 1.52% → 1.17%. Of seeds 33–72, the folding check won on 38
+//!    (3.56% → 0.49%) and 46 (2.76% → 0.38%) and lost on 35, and the crossing check won on
+//!    64 (8.84% → 1.79%). On the 18 scans of `../shared/data` the fits of four changed (mean
+//!    distance: *Dancing Faun* 0.83% → 0.72% of its size, its legs now reaching both feet;
+//!    *Dancing Girl* 1.11% → 1.06%; TOSCA *Victoria 2* 1.12% → 1.09%; *Michael 12* 0.90% →
+//!    0.88%), and no lost set did.
 //!    On statues cut part-way through a limb (seeds 40–69) the crossing check ran on three
 //!    cut through a thigh and won on one (seed 55: 0.83% → 0.30% over the joints the scan
 //!    has). The folding check, run again on the four cut statues whose fits showed a fold
