@@ -672,12 +672,7 @@ pub fn register(
         && let Some(b) = s.world.most_crossed(&mirror, &given_lost)
         && let Some(w) = s.world.exchanged_below(b, &mirror)
     {
-        let mut skeleton = w.to_skeleton();
-        collapse(&mut skeleton, &given_lost);
-        let c = Candidate {
-            skeleton,
-            scale: s.world.block_scale,
-        };
+        let c = full.start_at(&w, s.world.block_scale);
         let ch = Challenge {
             start: &c,
             scale,
@@ -711,12 +706,7 @@ pub fn register(
         folded = s.world.most_folded(&skip, limit);
     }
     if let Some(a) = folded {
-        let mut skeleton = s.world.unfolded(a).to_skeleton();
-        collapse(&mut skeleton, &given_lost);
-        let c = Candidate {
-            skeleton,
-            scale: s.world.block_scale,
-        };
+        let c = full.start_at(&s.world.unfolded(a), s.world.block_scale);
         let ch = Challenge {
             start: &c,
             scale,
@@ -802,7 +792,13 @@ impl FullRun<'_> {
     /// The start of a facing check (levels 3 and 5 in the module docs): `world` turned around
     /// ([`WorldSkeleton::turned_around`]) at `scale`, its known-lost bones collapsed.
     fn turned(&self, world: &WorldSkeleton, scale: f32) -> Candidate {
-        let mut skeleton = world.turned_around(&mirrors(&world.template)).to_skeleton();
+        self.start_at(&world.turned_around(&mirrors(&world.template)), scale)
+    }
+
+    /// A start from `world` at `scale`, its known-lost bones collapsed (every start of a
+    /// check of level 5).
+    fn start_at(&self, world: &WorldSkeleton, scale: f32) -> Candidate {
+        let mut skeleton = world.to_skeleton();
         collapse(&mut skeleton, self.lost);
         Candidate { skeleton, scale }
     }
