@@ -622,8 +622,8 @@ pub fn register(
     } else {
         Vec::new()
     };
-    // The checks that follow the refit rounds (the second facing check, the crossed-limbs
-    // check), when they may run, share the second half of what follows level 0.
+    // The checks that follow the refit rounds (the second facing check, the crossed- and
+    // folded-limbs checks), when they may run, share the second half of what follows level 0.
     let recheck = opts.front.is_none()
         && !matches!(opts.init, Init::Given(_))
         && opts.recheck_facing_above.is_finite();
@@ -650,20 +650,21 @@ pub fn register(
     let level1_span = span(level1_start, checks_start, 0, rounds);
     let (mut s, its) = full.refine(world, scale, units0, pause, fraction, level1_span, &rr)?;
     iterations += its;
+    let ch = Challenge { scale, rr: &rr };
     // The second facing check (see the module docs): the turned fit wins with both the
     // lower score and the lower implausibility.
     let implausible = super::init::implausibility(&s.world.to_skeleton());
     if recheck && implausible > opts.recheck_facing_above {
         let c = full.turned(&s.world, s.world.block_scale);
-        let ch = Challenge {
-            start: &c,
-            scale,
-            rr: &rr,
-            span: check_span(0),
-        };
-        s = full.challenge(s, &ch, &mut iterations, |kept, other, t| {
-            other < kept && super::init::implausibility(&t.to_skeleton()) < implausible
-        })?;
+        s = full.challenge(
+            s,
+            &ch,
+            (&c, check_span(0)),
+            &mut iterations,
+            |kept, other, t| {
+                other < kept && super::init::implausibility(&t.to_skeleton()) < implausible
+            },
+        )?;
     }
     // The crossed-limbs check (see the module docs): the limbs below the most crossed pair
     // exchanged; the uncrossed fit wins with the lower score.
@@ -673,13 +674,8 @@ pub fn register(
         && let Some(w) = s.world.exchanged_below(b, &mirror)
     {
         let c = full.start_at(&w, s.world.block_scale);
-        let ch = Challenge {
-            start: &c,
-            scale,
-            rr: &rr,
-            span: check_span(1),
-        };
-        s = full.challenge(s, &ch, &mut iterations, |kept, other, _| other < kept)?;
+        let lower = |kept: f64, other: f64, _: &WorldSkeleton| other < kept;
+        s = full.challenge(s, &ch, (&c, check_span(1)), &mut iterations, lower)?;
     }
     // The folded-limbs check (see the module docs): the chain below the most folded joint
     // laid straight; the unfolded fit wins with the lower score. A limb folded back onto
@@ -695,10 +691,13 @@ pub fn register(
     } else {
         None
     };
+    // The support points' k-d tree, built once for this and level 6.
+    let mut support_tree = None;
     if folded.is_some() && opts.missing {
         s.refresh().map_err(cancelled)?;
         let (tree, rho) = support_points(&mut s, &level0_points)?;
         let support = examine_support(&mut s, &tree, rho)?;
+        support_tree = Some((tree, rho));
         let lost = lost_limbs(&mut s, &support, &given_lost)?;
         for (k, l) in skip.iter_mut().zip(&lost) {
             *k |= *l;
@@ -707,18 +706,16 @@ pub fn register(
     }
     if let Some(a) = folded {
         let c = full.start_at(&s.world.unfolded(a), s.world.block_scale);
-        let ch = Challenge {
-            start: &c,
-            scale,
-            rr: &rr,
-            span: check_span(2),
-        };
-        s = full.challenge(s, &ch, &mut iterations, |kept, other, _| other < kept)?;
+        let lower = |kept: f64, other: f64, _: &WorldSkeleton| other < kept;
+        s = full.challenge(s, &ch, (&c, check_span(2)), &mut iterations, lower)?;
     }
     s.refresh().map_err(cancelled)?;
     // Missing limbs (level 6): those known, and those found when `missing` is on.
     let (support, missing) = if opts.missing || any_given {
-        let (tree, rho) = support_points(&mut s, &level0_points)?;
+        let (tree, rho) = match support_tree {
+            Some(t) => t,
+            None => support_points(&mut s, &level0_points)?,
+        };
         let mut support = examine_support(&mut s, &tree, rho)?;
         let missing = if opts.missing {
             lost_limbs(&mut s, &support, &given_lost)?
@@ -776,16 +773,12 @@ struct RefitRounds<'a> {
     span: (f32, f32),
 }
 
-/// A challenger to a finished fit ([`FullRun::challenge`]).
+/// What every challenger to a finished fit shares ([`FullRun::challenge`]).
 struct Challenge<'a> {
-    /// Its start.
-    start: &'a Candidate,
     /// The scale its level 1 and refit rounds run at (the level-0 fit's).
     scale: f32,
-    /// The refit rounds it goes through (their span replaced by `span`).
+    /// The refit rounds it goes through (their span replaced by the challenger's).
     rr: &'a RefitRounds<'a>,
-    /// Its progress span.
-    span: (f32, f32),
 }
 
 impl FullRun<'_> {
@@ -830,31 +823,32 @@ impl FullRun<'_> {
         Ok((s, iterations))
     }
 
-    /// A **challenger** to the fit `s` (the checks of level 5 in the module docs): `ch.start`
+    /// A **challenger** to the fit `s` (the checks of level 5 in the module docs): `start`
     /// registered through level 0, level 1 and the refit rounds of `ch.rr`, its progress in
-    /// `ch.span`. Returns the challenger's solver when `wins(kept, other, challenger)` says so
+    /// `progress`. Returns the challenger's solver when `wins(kept, other, challenger)` says so
     /// (`kept` and `other`: the two-sided scores of the fit and the challenger on the level-0
     /// points), adding its iterations to `iterations`; otherwise `s`, as it was.
     fn challenge<'p>(
         &self,
         mut s: Solver<'p>,
         ch: &Challenge,
+        (start, progress): (&Candidate, (f32, f32)),
         iterations: &mut usize,
         wins: impl Fn(f64, f64, &WorldSkeleton) -> bool,
     ) -> Result<Solver<'p>> {
         let Some(hook) = s.take_pause() else {
             return Ok(s);
         };
-        let (lo, hi) = ch.span;
+        let (lo, hi) = progress;
         let kept = self.score(&s.world, s.world.block_scale, hook, lo)?;
         let rr = RefitRounds {
-            span: ch.span,
+            span: progress,
             ..*ch.rr
         };
         let first = span(lo, hi, 0, rr.rounds);
         let half = (first.0, 0.5 * (first.0 + first.1));
         let mut fraction = lo;
-        let r = self.run(rr.chosen, ch.start, hook, &mut fraction, half)?;
+        let r = self.run(rr.chosen, start, hook, &mut fraction, half)?;
         let (mut t, its) = self.refine(
             r.world,
             ch.scale,

@@ -324,12 +324,8 @@ impl WorldSkeleton {
                 let parent = t.bones[i]
                     .parent
                     .map_or(out.root_rotation, |p| out.frames[p]);
-                let base = parent * self.rest_relative[i];
-                let axis = base * Vec3::X;
-                let d = (posed.bones[m].c2 - posed.bones[m].c1)
-                    .try_normalize()
-                    .unwrap_or(axis);
-                out.frames[i] = (crate::geometry::frames::rotation_arc(axis, d) * base).normalize();
+                let (m1, m2) = (posed.bones[m].c1, posed.bones[m].c2);
+                out.frames[i] = self.swung_from_rest(i, parent, m2 - m1);
             }
         }
         out.enforce();
@@ -400,6 +396,15 @@ impl WorldSkeleton {
         out
     }
 
+    /// The frame of free bone `i` under a parent frame `parent`: its rest frame relative to
+    /// the parent swung minimally onto `direction` (the rest axis when `direction` is zero).
+    fn swung_from_rest(&self, i: usize, parent: Quat, direction: Vec3) -> Quat {
+        let base = parent * self.rest_relative[i];
+        let axis = base * Vec3::X;
+        let d = direction.try_normalize().unwrap_or(axis);
+        (crate::geometry::frames::rotation_arc(axis, d) * base).normalize()
+    }
+
     /// The skeleton with root rotation `root`, each bone `i` taking the direction, length and
     /// radii of bone `mirror[i]` (itself when `None`), free frames swung minimally from rest.
     fn rebuilt(&self, root: Quat, mirror: &[Option<usize>]) -> WorldSkeleton {
@@ -419,12 +424,8 @@ impl WorldSkeleton {
                 let parent = def.parent.map_or(out.root_rotation, |p| out.frames[p]);
                 match def.kind {
                     BoneKind::Free => {
-                        let base = parent * self.rest_relative[i];
-                        let axis = base * Vec3::X;
                         let b = posed.bones[mirror[i].unwrap_or(i)];
-                        let d = (b.c2 - b.c1).try_normalize().unwrap_or(axis);
-                        out.frames[i] =
-                            (crate::geometry::frames::rotation_arc(axis, d) * base).normalize();
+                        out.frames[i] = self.swung_from_rest(i, parent, b.c2 - b.c1);
                     }
                     BoneKind::Block => {
                         out.frames[i] = (out.root_rotation * self.rest_relative[i]).normalize();
