@@ -396,6 +396,90 @@ impl WorldSkeleton {
         out
     }
 
+    /// The root block **slid** one bone down (the start of the slid-block check): the block
+    /// moved rigidly by minus its *spine bone*'s vector (the block bone that carries the
+    /// trunk's chain, the human's `pelvis_up`), so its spine end lands where its root joint
+    /// was; each free bone hanging from the block (the spine's first bone, the thighs) keeps
+    /// its far end and is re-aimed from its moved first joint, so everything below and above
+    /// stays where it was. `None` when the template has no block or no trunk chain on it.
+    /// A fit that has sat the pelvis one bone too high along the spine has the thighs
+    /// starting above the legs, where no points cover them; this start puts it back.
+    pub fn slid_block(&self) -> Option<WorldSkeleton> {
+        let t = self.template.clone();
+        let trunk = super::solver::trunk_bones(&t);
+        let is_block = |b: usize| t.bones[b].kind == BoneKind::Block;
+        // The block bone carrying the trunk's first free bone.
+        let spine = t.bones.iter().enumerate().find_map(|(b, def)| {
+            let p = def.parent?;
+            (def.kind == BoneKind::Free && trunk[b] && is_block(p)).then_some(p)
+        })?;
+        let posed = self.pose();
+        let delta = posed.bones[spine].c1 - posed.bones[spine].c2;
+        if delta.length() <= 0.0 {
+            return None;
+        }
+        let mut out = self.clone();
+        out.root_position += delta;
+        for (b, def) in t.bones.iter().enumerate() {
+            if let Some(p) = def.parent
+                && is_block(p)
+                && def.kind == BoneKind::Free
+            {
+                let bone = &posed.bones[b];
+                out.aim(b, bone.c1 + delta, bone.c2);
+            }
+        }
+        out.enforce();
+        Some(out)
+    }
+
+    /// The chain from free bone `a` to its end **slid one bone down** (the start of the
+    /// slid-limb check): `a` reaches from its first joint to the end of the next bone of its
+    /// chain, each later bone takes the direction and length of the one after it, and the
+    /// last keeps its own, continuing from its new first joint; each frame is swung
+    /// minimally onto its new direction; radii and everything else unchanged. `a` itself
+    /// when it is the last of its chain. A fit whose leg sat one bone up the limb (the knee
+    /// at the hip, the ankle at the knee) has its thigh in the trunk, uncovered at its root;
+    /// this start moves each joint down to where the next one was.
+    pub fn slid_down(&self, a: usize) -> WorldSkeleton {
+        let t = self.template.clone();
+        let mut out = self.clone();
+        let Some(chain) = t.bones[a].chain.map(|c| c.0) else {
+            return out;
+        };
+        let bones = &t.chains[chain].bones;
+        let Some(k) = bones.iter().position(|&b| b == a) else {
+            return out;
+        };
+        let line = &bones[k..];
+        if line.len() < 2 {
+            return out;
+        }
+        let posed = self.pose();
+        let swing = |out: &mut WorldSkeleton, b: usize, d: Vec3, len: f32| {
+            let axis = out.frames[b] * Vec3::X;
+            out.frames[b] =
+                (crate::geometry::frames::rotation_arc(axis, d) * out.frames[b]).normalize();
+            out.lengths[b] = len;
+        };
+        let reach = posed.bones[line[1]].c2 - posed.bones[a].c1;
+        if reach.length() <= 0.0 {
+            return out;
+        }
+        swing(&mut out, a, reach.normalize(), reach.length());
+        for w in line[1..].windows(2) {
+            let next = w[1];
+            swing(
+                &mut out,
+                w[0],
+                self.frames[next] * Vec3::X,
+                self.lengths[next],
+            );
+        }
+        out.enforce();
+        out
+    }
+
     /// The frame of free bone `i` under a parent frame `parent`: its rest frame relative to
     /// the parent swung minimally onto `direction` (the rest axis when `direction` is zero).
     fn swung_from_rest(&self, i: usize, parent: Quat, direction: Vec3) -> Quat {
