@@ -370,16 +370,8 @@ impl WorldSkeleton {
     /// found), their lengths in the template's rest proportions; each frame is swung
     /// minimally onto the line; radii and everything else unchanged.
     pub fn unfolded(&self, a: usize) -> WorldSkeleton {
-        let t = self.template.clone();
         let mut out = self.clone();
-        let Some(chain) = t.bones[a].chain.map(|c| c.0) else {
-            return out;
-        };
-        let bones = &t.chains[chain].bones;
-        let Some(k) = bones.iter().position(|&b| b == a) else {
-            return out;
-        };
-        let line = &bones[k..];
+        let line = self.chain_from(a);
         let rest: f32 = line.iter().map(|&b| self.rest_lengths[b]).sum();
         if rest <= 0.0 {
             return out;
@@ -387,13 +379,31 @@ impl WorldSkeleton {
         let reach = self.lengths[a];
         let d = self.frames[a] * Vec3::X;
         for &b in line {
-            out.lengths[b] = reach * self.rest_lengths[b] / rest;
-            let axis = out.frames[b] * Vec3::X;
-            out.frames[b] =
-                (crate::geometry::frames::rotation_arc(axis, d) * out.frames[b]).normalize();
+            out.swing_onto(b, d, reach * self.rest_lengths[b] / rest);
         }
         out.enforce();
         out
+    }
+
+    /// The bones of `a`'s chain from `a` to the chain's end (empty when `a` is in no chain).
+    fn chain_from(&self, a: usize) -> &[usize] {
+        let t = &self.template;
+        let Some(bones) = t.bones[a].chain.map(|c| &t.chains[c.0].bones) else {
+            return &[];
+        };
+        bones
+            .iter()
+            .position(|&b| b == a)
+            .map_or(&[], |k| &bones[k..])
+    }
+
+    /// Swings bone `b`'s frame minimally onto the unit direction `d` and gives it length
+    /// `len` (its descendants keep their world frames).
+    fn swing_onto(&mut self, b: usize, d: Vec3, len: f32) {
+        let axis = self.frames[b] * Vec3::X;
+        self.frames[b] =
+            (crate::geometry::frames::rotation_arc(axis, d) * self.frames[b]).normalize();
+        self.lengths[b] = len;
     }
 
     /// The root block **slid** one bone down (the start of the slid-block check): the block
@@ -442,39 +452,20 @@ impl WorldSkeleton {
     /// at the hip, the ankle at the knee) has its thigh in the trunk, uncovered at its root;
     /// this start moves each joint down to where the next one was.
     pub fn slid_down(&self, a: usize) -> WorldSkeleton {
-        let t = self.template.clone();
         let mut out = self.clone();
-        let Some(chain) = t.bones[a].chain.map(|c| c.0) else {
-            return out;
-        };
-        let bones = &t.chains[chain].bones;
-        let Some(k) = bones.iter().position(|&b| b == a) else {
-            return out;
-        };
-        let line = &bones[k..];
+        let line = self.chain_from(a);
         if line.len() < 2 {
             return out;
         }
         let posed = self.pose();
-        let swing = |out: &mut WorldSkeleton, b: usize, d: Vec3, len: f32| {
-            let axis = out.frames[b] * Vec3::X;
-            out.frames[b] =
-                (crate::geometry::frames::rotation_arc(axis, d) * out.frames[b]).normalize();
-            out.lengths[b] = len;
-        };
         let reach = posed.bones[line[1]].c2 - posed.bones[a].c1;
         if reach.length() <= 0.0 {
             return out;
         }
-        swing(&mut out, a, reach.normalize(), reach.length());
+        out.swing_onto(a, reach.normalize(), reach.length());
         for w in line[1..].windows(2) {
             let next = w[1];
-            swing(
-                &mut out,
-                w[0],
-                self.frames[next] * Vec3::X,
-                self.lengths[next],
-            );
+            out.swing_onto(w[0], self.frames[next] * Vec3::X, self.lengths[next]);
         }
         out.enforce();
         out
