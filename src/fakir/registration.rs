@@ -133,10 +133,11 @@
 //!    last, after the folding check. Each start
 //!    goes through levels 0, 1 and the refit rounds and wins with the lower score, as the
 //!    other checks' do; the support is measured once for both (and its k-d tree kept for
-//!    level 6), so a fit where neither runs pays a few milliseconds. Over the fits of 72
-//!    complete synthetic statues only seeds 1 and 31 had a thigh whose reach was under 0.5
-//!    (both thighs at 0): seed 1's block slid down (4.61% → 1.90%), seed 31's block and then
-//!    its left leg (3.71% → 0.43%). A missing limb (coverage under
+//!    level 6), so a fit where neither runs pays a few milliseconds. On the fits of
+//!    seeds 1–32 made without the checks only seeds 1 and 31 had a thigh whose reach was
+//!    under 0.5 (both thighs at 0): seed 1's block slid down (4.61% → 1.90%), seed 31's
+//!    block and then its left leg (3.71% → 0.43%). Of seeds 33–72, 52 (2.72% → 1.30%, but
+//!    now with a right foot wrongly found lost), 67 (2.24%, unchanged) and 68 had one. A missing limb (coverage under
 //!    [`super::support::MISSING`]) and a limb known lost are left to level 6. On real scans
 //!    a thigh under drapery, or an animal's hind leg, is often uncovered at its root too,
 //!    and the checks run there (see the README's figures), at the cost of one or two more
@@ -1276,8 +1277,9 @@ pub const FOLDED: f32 = 150.0;
 
 /// The support `reach` under which a limb bone hanging from the root block is uncovered at
 /// its root (the slid-block check, level 5 in the module docs): no axial tenth of it from
-/// its first joint is half covered. Measured on the fits of 72 complete synthetic statues:
-/// only the two whose pelvis sat a bone too high (seeds 1 and 31) had a thigh below 0.5.
+/// its first joint is half covered. Measured on the fits of 32 complete synthetic statues
+/// (seeds 1–32): only the two whose pelvis sat a bone too high (seeds 1 and 31) had a thigh
+/// below 0.5, both at 0.
 pub const UNCOVERED_REACH: f32 = 0.1;
 
 /// Near-ties of two-sided scores (factor) that anatomy decides ([`preferred`]).
