@@ -130,14 +130,14 @@
 //!    bone, the bones hanging from it re-aimed at their old ends); then, when a limb bone on
 //!    the block is still uncovered, the least covered one's chain is slid one bone down
 //!    ([`WorldSkeleton::slid_down`]: each joint moved to where the next one was). They run
-//!    last, after the folding check. Each start
-//!    goes through levels 0, 1 and the refit rounds and wins with the lower score, as the
-//!    other checks' do; the support is measured once for both (and its k-d tree kept for
-//!    level 6), so a fit where neither runs pays a few milliseconds. On the fits of
-//!    seeds 1–32 made without the checks only seeds 1 and 31 had a thigh whose reach was
-//!    under 0.5 (both thighs at 0): seed 1's block slid down (4.61% → 1.90%), seed 31's
-//!    block and then its left leg (3.71% → 0.43%). Of seeds 33–72, 52 (2.72% → 1.30%, but
-//!    now with a right foot wrongly found lost), 67 (2.24%, unchanged) and 68 had one. A missing limb (coverage under
+//!    last, after the folding check. Each start goes through levels 0, 1 and the refit
+//!    rounds and wins with the lower score, as the other checks' do; the support is
+//!    measured once for both (and its k-d tree kept for level 6), so a fit where neither
+//!    runs pays a few milliseconds. On the fits of seeds 1–32 made without the checks only
+//!    seeds 1 and 31 had a thigh whose reach was under 0.5 (both thighs at 0): seed 1's
+//!    block slid down (4.61% → 1.90%), seed 31's block and then its left leg (3.71% →
+//!    0.43%). Of seeds 33–72, 52 (2.72% → 1.30%, but now with a right foot wrongly found
+//!    lost), 67 (2.24%, unchanged) and 68 had one. A missing limb (coverage under
 //!    [`super::support::MISSING`]) and a limb known lost are left to level 6. On real scans
 //!    a thigh under drapery, or an animal's hind leg, is often uncovered at its root too,
 //!    and the checks run there (see the README's figures), at the cost of one or two more
@@ -271,11 +271,12 @@ pub struct RegistrationOptions {
     /// ([`WorldSkeleton::unfolded`]) through levels 0, 1 and the refit rounds; the unfolded
     /// fit wins with the lower two-sided score. Skipped from a given skeleton.
     pub unfold: bool,
-    /// The slid-block check (level 5 in the module docs): a fit in which a limb hanging from
-    /// the root block is uncovered at its root ([`UNCOVERED_REACH`]) is registered again
-    /// with the block slid one bone down ([`WorldSkeleton::slid_block`]) through levels 0,
-    /// 1 and the refit rounds; the slid fit wins with the lower two-sided score. Skipped
-    /// from a given skeleton.
+    /// The slid-block and slid-limb checks (level 5 in the module docs): a fit in which
+    /// every limb hanging from the root block is uncovered at its root ([`UNCOVERED_REACH`])
+    /// is registered again with the block slid one bone down ([`WorldSkeleton::slid_block`]),
+    /// then one in which such a limb still is, with that limb slid one bone down its chain
+    /// ([`WorldSkeleton::slid_down`]), each through levels 0, 1 and the refit rounds; a slid
+    /// fit wins with the lower two-sided score. Skipped from a given skeleton.
     pub slide: bool,
 }
 
@@ -656,7 +657,8 @@ pub fn register(
         Vec::new()
     };
     // The checks that follow the refit rounds (the second facing check, the crossed- and
-    // folded-limbs checks), when they may run, share the second half of what follows level 0.
+    // folded-limbs checks, the slid-block and slid-limb checks), when they may run, share the
+    // second half of what follows level 0.
     let recheck = opts.front.is_none()
         && !matches!(opts.init, Init::Given(_))
         && opts.recheck_facing_above.is_finite();
@@ -685,6 +687,8 @@ pub fn register(
     let (mut s, its) = full.refine(world, scale, units0, pause, fraction, level1_span, &rr)?;
     iterations += its;
     let ch = Challenge { scale, rr: &rr };
+    // The rule of every check after the facing one: the challenger wins with the lower score.
+    let lower = |kept: f64, other: f64, _: &WorldSkeleton| other < kept;
     // The second facing check (see the module docs): the turned fit wins with both the
     // lower score and the lower implausibility.
     let implausible = super::init::implausibility(&s.world.to_skeleton());
@@ -708,7 +712,6 @@ pub fn register(
         && let Some(w) = s.world.exchanged_below(b, &mirror)
     {
         let c = full.start_at(&w, s.world.block_scale);
-        let lower = |kept: f64, other: f64, _: &WorldSkeleton| other < kept;
         s = full.challenge(s, &ch, (&c, check_span(1)), &mut iterations, lower)?;
     }
     // The folded-limbs check (see the module docs): the chain below the most folded joint
@@ -740,7 +743,6 @@ pub fn register(
     }
     if let Some(a) = folded {
         let c = full.start_at(&s.world.unfolded(a), s.world.block_scale);
-        let lower = |kept: f64, other: f64, _: &WorldSkeleton| other < kept;
         s = full.challenge(s, &ch, (&c, check_span(2)), &mut iterations, lower)?;
     }
     // The slid-block and slid-limb checks (see the module docs): a limb hanging from the
@@ -771,7 +773,6 @@ pub fn register(
             None => support_points(&mut s, &level0_points)?,
         };
         let mut support = examine_support(&mut s, &tree, rho)?;
-        let lower = |kept: f64, other: f64, _: &WorldSkeleton| other < kept;
         // The block check when every limb on it is uncovered; the limb check on the least
         // covered one that still is.
         if limbs.iter().all(|&b| uncovered(&support, b))
