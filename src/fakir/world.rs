@@ -471,6 +471,141 @@ impl WorldSkeleton {
         out
     }
 
+    /// The chain from free bone `a` to its end **slid one bone out** (the start of the
+    /// stretched-end check): like [`WorldSkeleton::slid_down`], except that the chain's
+    /// last two bones share the old last bone's vector, in the template's rest proportions,
+    /// so the chain's tip stays where it was. [`WorldSkeleton::slid_down`] itself when the
+    /// chain from `a` has fewer than three bones. A fit whose arm sat one joint in (the
+    /// elbow on the shoulder, the wrist on the elbow) has stretched its hand over the
+    /// forearm and the hand; this start moves each joint out to where the next one was and
+    /// splits that long last bone in two.
+    pub fn slid_out(&self, a: usize) -> WorldSkeleton {
+        let mut out = self.slid_down(a);
+        let line = self.chain_from(a);
+        let n = line.len();
+        if n < 3 {
+            return out;
+        }
+        let (p, last) = (line[n - 2], line[n - 1]);
+        let rest = self.rest_lengths[p] + self.rest_lengths[last];
+        if rest <= 0.0 {
+            return out;
+        }
+        let d = self.frames[last] * Vec3::X;
+        let total = self.lengths[last];
+        out.swing_onto(p, d, total * self.rest_lengths[p] / rest);
+        out.swing_onto(last, d, total * self.rest_lengths[last] / rest);
+        out.enforce();
+        out
+    }
+
+    /// The chain below free bone `a` **reversed** (the start of the hanging-limb check):
+    /// `a` reaches from its first joint to where the chain's tip was, and the bones below
+    /// it are laid back along the fit's own path from that tip to `a`'s old end, in the
+    /// template's rest proportions (the chain's tip lands on `a`'s old end); each frame is
+    /// swung minimally onto its new direction; radii and everything else unchanged. `a`
+    /// itself when fewer than two bones hang below it in its chain. A fit that ran an arm
+    /// backwards (the clavicle out to the hand, the arm coming back to the shoulder) has a
+    /// clavicle across empty space; this start turns the arm around.
+    pub fn reversed_below(&self, a: usize) -> WorldSkeleton {
+        let mut out = self.clone();
+        let line = self.chain_from(a);
+        if line.len() < 3 {
+            return out;
+        }
+        let posed = self.pose();
+        // The path back from the tip: the chain's joints below `a`, last first.
+        let mut path: Vec<Vec3> = line[1..].iter().map(|&b| posed.bones[b].c2).collect();
+        path.reverse();
+        path.push(posed.bones[a].c2);
+        let seg: Vec<f32> = path.windows(2).map(|w| (w[1] - w[0]).length()).collect();
+        let total: f32 = seg.iter().sum();
+        let rest: f32 = line[1..].iter().map(|&b| self.rest_lengths[b]).sum();
+        let root = posed.bones[a].c1;
+        let reach = path[0] - root;
+        if total <= 0.0 || rest <= 0.0 || reach.length() <= 0.0 {
+            return out;
+        }
+        // The point at arc length `s` along the path.
+        let at = |s: f32| -> Vec3 {
+            let mut left = s;
+            for (w, &l) in path.windows(2).zip(&seg) {
+                if left <= l && l > 0.0 {
+                    return w[0] + (w[1] - w[0]) * (left / l);
+                }
+                left -= l;
+            }
+            path[path.len() - 1]
+        };
+        out.swing_onto(a, reach.normalize(), reach.length());
+        let (mut from, mut walked) = (path[0], 0.0);
+        for &b in &line[1..] {
+            walked += total * self.rest_lengths[b] / rest;
+            let to = at(walked);
+            let d = to - from;
+            if d.length() > 0.0 {
+                out.swing_onto(b, d.normalize(), d.length());
+            }
+            from = to;
+        }
+        out.enforce();
+        out
+    }
+
+    /// The free bone of a limb chain most clearly **hanging in the air**: a bone (none in
+    /// `skip`) whose support coverage is under `missing`, while at least two bones hang
+    /// below it in its chain and every one of them is covered (at least `missing`); the
+    /// least covered such bone, or `None`. A limb cannot hang from a bone that is not
+    /// there: a fit that ran an arm backwards (see [`WorldSkeleton::reversed_below`]) has
+    /// its clavicle across empty space and the arm on the scan.
+    pub fn most_hanging(&self, skip: &[bool], coverage: &[f32], missing: f32) -> Option<usize> {
+        let t = &self.template;
+        let mut best: Option<(usize, f32)> = None;
+        for (a, def) in t.bones.iter().enumerate() {
+            if skip[a] || def.kind != BoneKind::Free || coverage[a] >= missing {
+                continue;
+            }
+            let below = &self.chain_from(a)[1..];
+            if below.len() < 2 || below.iter().any(|&b| skip[b] || coverage[b] < missing) {
+                continue;
+            }
+            if best.is_none_or(|(_, c)| coverage[a] < c) {
+                best = Some((a, coverage[a]));
+            }
+        }
+        best.map(|(a, _)| a)
+    }
+
+    /// The chain whose **end is most stretched**: among the chains of at least three free
+    /// bones (none in `skip`), the one whose last bone is longer, relative to the bone before
+    /// it, than `limit` times the template's rest ratio, the largest such excess first;
+    /// returned as the chain's first bone, or `None`. An arm slid one joint in (see
+    /// [`WorldSkeleton::slid_out`]) has a hand as long as a forearm and a hand together.
+    pub fn most_stretched_end(&self, skip: &[bool], limit: f32) -> Option<usize> {
+        let t = &self.template;
+        let mut best: Option<(usize, f32)> = None;
+        for c in &t.chains {
+            let n = c.bones.len();
+            if n < 3
+                || c.bones
+                    .iter()
+                    .any(|&b| skip[b] || t.bones[b].kind != BoneKind::Free)
+            {
+                continue;
+            }
+            let (p, last) = (c.bones[n - 2], c.bones[n - 1]);
+            let rest = self.rest_lengths[last] / self.rest_lengths[p].max(1e-12);
+            if self.lengths[p] <= 0.0 || rest <= 0.0 {
+                continue;
+            }
+            let ratio = self.lengths[last] / self.lengths[p] / rest;
+            if ratio > limit && best.is_none_or(|(_, r)| ratio > r) {
+                best = Some((c.bones[0], ratio));
+            }
+        }
+        best.map(|(a, _)| a)
+    }
+
     /// The frame of free bone `i` under a parent frame `parent`: its rest frame relative to
     /// the parent swung minimally onto `direction` (the rest axis when `direction` is zero).
     fn swung_from_rest(&self, i: usize, parent: Quat, direction: Vec3) -> Quat {
