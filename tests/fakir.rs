@@ -2134,3 +2134,39 @@ fn a_fit_with_an_arm_run_backwards_is_registered_again_turned_around() {
         unswapped_joint_error(&fit.skeleton, &s.truth, "seed 37");
     });
 }
+
+#[test]
+fn the_arm_checks_starts_and_detectors_hold_on_every_template() {
+    use pygmalion::anatomy::Template;
+    use pygmalion::fakir::support::MISSING;
+    for name in ["human", "centaur", "quadruped", "mermaid"] {
+        let t = std::sync::Arc::new(Template::builtin(name).unwrap());
+        let w = WorldSkeleton::from_skeleton(&Skeleton::rest(t.clone()));
+        let nb = t.bones.len();
+        let none = vec![false; nb];
+        // Every bone uncovered, then each bone alone uncovered: never a panic, and a bone
+        // found hanging has two covered bones or more below it.
+        assert_eq!(
+            w.most_hanging(&none, &vec![0.0; nb], MISSING),
+            None,
+            "{name}"
+        );
+        for b in 0..nb {
+            let mut coverage = vec![1.0f32; nb];
+            coverage[b] = 0.0;
+            if let Some(a) = w.most_hanging(&none, &coverage, MISSING) {
+                assert_eq!(a, b, "{name}");
+            }
+        }
+        // At rest nothing is stretched.
+        assert_eq!(w.most_stretched_end(&none, 1.01), None, "{name}");
+        // Every start from every bone keeps a finite skeleton with the same bones.
+        for b in 0..nb {
+            for s in [w.slid_out(b), w.reversed_below(b), w.slid_down(b)] {
+                let p = s.pose();
+                assert!(p.joints.iter().all(|j| j.is_finite()), "{name}: bone {b}");
+                assert!(s.lengths.iter().all(|l| l.is_finite() && *l >= 0.0));
+            }
+        }
+    }
+}

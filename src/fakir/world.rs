@@ -565,7 +565,7 @@ impl WorldSkeleton {
             if skip[a] || def.kind != BoneKind::Free || coverage[a] >= missing {
                 continue;
             }
-            let below = &self.chain_from(a)[1..];
+            let below = self.chain_from(a).get(1..).unwrap_or(&[]);
             if below.len() < 2 || below.iter().any(|&b| skip[b] || coverage[b] < missing) {
                 continue;
             }
