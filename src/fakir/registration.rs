@@ -835,10 +835,11 @@ pub fn register(
         }
         // The stretched-end check: a limb whose last bone is too long for the one before it
         // (neither known lost, trunk, nor missing on the support above) slid one bone out.
-        let mut skip = trunk.clone();
-        for (b, k) in skip.iter_mut().enumerate() {
-            *k |= given_lost[b] || support[b].coverage < super::support::MISSING;
-        }
+        let skip: Vec<bool> = skip
+            .iter()
+            .zip(&support)
+            .map(|(&k, x)| k || x.coverage < super::support::MISSING)
+            .collect();
         if let Some(a) = s.world.most_stretched_end(&skip, STRETCHED_END) {
             let c = full.start_at(&s.world.slid_out(a), s.world.block_scale);
             s = full.challenge(s, &ch, (&c, check_span(6)), &mut iterations, lower)?;
