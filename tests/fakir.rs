@@ -1811,16 +1811,8 @@ fn sliding_the_block_down_keeps_everything_off_it_in_place() {
         assert_eq!(slid.block_scale, w.block_scale);
         assert!((slid.root_rotation.dot(w.root_rotation)).abs() > 1.0 - 1e-6);
         // Every joint off the block stays where it was; the bones on the block reach it.
-        for (k, joint) in t.joints.iter().enumerate() {
-            if ["pelvis", "spine_base", "l_hip", "r_hip"].contains(&joint.name.as_str()) {
-                continue;
-            }
-            assert!(
-                (after.joints[k] - before.joints[k]).length() < 1e-5,
-                "seed {seed}: {}",
-                joint.name
-            );
-        }
+        let block = ["pelvis", "spine_base", "l_hip", "r_hip"];
+        assert_only_these_moved(&t, &before, &after, &block, &format!("seed {seed}"));
         for name in ["spine_lower", "l_thigh", "r_thigh"] {
             let (c1, c2) = (after.bones[b(name)].c1, after.bones[b(name)].c2);
             assert!(((c2 - c1).length() - slid.lengths[b(name)]).abs() < 1e-5);
@@ -1856,16 +1848,8 @@ fn sliding_a_limb_down_moves_each_joint_to_the_next() {
             assert!((at(2) - was(3)).length() < 1e-4, "seed {seed}: {first}");
             assert!(((at(3) - at(2)) - (was(3) - was(2))).length() < 1e-4);
             // Everything off the chain stays.
-            for (k, joint) in t.joints.iter().enumerate() {
-                if joints[1..].contains(&joint.name.as_str()) {
-                    continue;
-                }
-                assert!(
-                    (after.joints[k] - before.joints[k]).length() < 1e-5,
-                    "seed {seed}: {first} moved {}",
-                    joint.name
-                );
-            }
+            let what = format!("seed {seed}: {first}");
+            assert_only_these_moved(&t, &before, &after, &joints[1..], &what);
             // The last bone of a chain has nothing below to slide onto.
             let last = t.bone_index(&first.replace("thigh", "foot").replace("upper_arm", "hand"));
             let last = last.unwrap();
@@ -1897,6 +1881,26 @@ fn slid_registration() {
         let b = fit.skeleton.template.bone_index(name).unwrap();
         let reach = fit.support[b].reach;
         assert!(reach > UNCOVERED_REACH, "seed 31: {name} reach {reach}");
+    }
+}
+
+/// Asserts that every joint of `t` but those named in `moved` is where it was (1e-5).
+fn assert_only_these_moved(
+    t: &pygmalion::anatomy::Template,
+    before: &pygmalion::anatomy::Posed,
+    after: &pygmalion::anatomy::Posed,
+    moved: &[&str],
+    what: &str,
+) {
+    for (k, joint) in t.joints.iter().enumerate() {
+        if moved.contains(&joint.name.as_str()) {
+            continue;
+        }
+        assert!(
+            (after.joints[k] - before.joints[k]).length() < 1e-5,
+            "{what}: {} moved",
+            joint.name
+        );
     }
 }
 
@@ -1957,16 +1961,8 @@ fn sliding_a_limb_out_keeps_its_tip_and_splits_the_last_bone() {
             let wrist = was(3) + (was(4) - was(3)) * share;
             assert!((at(3) - wrist).length() < 1e-4, "seed {seed}: {first}");
             assert!((at(4) - was(4)).length() < 1e-4, "seed {seed}: {first}");
-            for (k, joint) in t.joints.iter().enumerate() {
-                if joints[1..].contains(&joint.name.as_str()) {
-                    continue;
-                }
-                assert!(
-                    (after.joints[k] - before.joints[k]).length() < 1e-5,
-                    "seed {seed}: {first} moved {}",
-                    joint.name
-                );
-            }
+            let what = format!("seed {seed}: {first}");
+            assert_only_these_moved(&t, &before, &after, &joints[1..], &what);
         }
         // A chain of two bones from `a` has no last pair to split: slid down.
         let shin = t.bone_index("l_shin").unwrap();
@@ -2041,12 +2037,7 @@ fn reversing_a_limb_lays_it_back_along_its_own_path() {
             // A joint laid across a bend cuts the corner: never longer than its share.
             assert!(len <= share + 1e-4, "seed {seed}: {b} {len} > {share}");
         }
-        for (k, joint) in t.joints.iter().enumerate() {
-            if joints[1..].contains(&joint.name.as_str()) {
-                continue;
-            }
-            assert!((after.joints[k] - before.joints[k]).length() < 1e-5);
-        }
+        assert_only_these_moved(&t, &before, &after, &joints[1..], &format!("seed {seed}"));
         // Fewer than two bones below: nothing to reverse.
         let fore = t.bone_index("r_forearm").unwrap();
         let same = w.reversed_below(fore).pose();

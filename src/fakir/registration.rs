@@ -742,11 +742,13 @@ pub fn register(
     // The folded-limbs check (see the module docs): the chain below the most folded joint
     // laid straight; the unfolded fit wins with the lower score. A limb folded back onto
     // the stump of a cut is lost, not misfitted: folds whose bones the lost-limb rules of
-    // level 6 would take on this fit are left out.
-    let mut skip = super::solver::trunk_bones(&template);
-    for (k, l) in skip.iter_mut().zip(&given_lost) {
+    // level 6 would take on this fit are left out. The checks on limbs below all leave out
+    // the trunk's bones and the bones known lost (`settled`).
+    let mut settled = super::solver::trunk_bones(&template);
+    for (k, l) in settled.iter_mut().zip(&given_lost) {
         *k |= *l;
     }
+    let mut skip = settled.clone();
     let limit = FOLDED.to_radians();
     let mut folded = if unfold {
         s.world.most_folded(&skip, limit)
@@ -773,7 +775,6 @@ pub fn register(
     // The slid-block and slid-limb checks (see the module docs): a limb hanging from the
     // block uncovered at its root (neither known lost nor missing) says the block sits a bone
     // too high, or the limb a bone up its own length.
-    let trunk = super::solver::trunk_bones(&template);
     let t = &template;
     // The limb bones hanging from the block (not known lost), and which of them are
     // uncovered at their root (a missing one, below `MISSING`, is left to level 6).
@@ -784,8 +785,7 @@ pub fn register(
                 && def
                     .parent
                     .is_some_and(|p| t.bones[p].kind == BoneKind::Block)
-                && !trunk[b]
-                && !given_lost[b]
+                && !settled[b]
         })
         .collect();
     let uncovered = |support: &[BoneSupport], b: usize| {
@@ -819,14 +819,10 @@ pub fn register(
         }
         // The hanging-limb check: a limb bone across empty space with the rest of its chain
         // on the scan (neither known lost nor trunk) turns the chain below it around.
-        let mut skip = trunk.clone();
-        for (k, l) in skip.iter_mut().zip(&given_lost) {
-            *k |= *l;
-        }
         let coverage: Vec<f32> = support.iter().map(|x| x.coverage).collect();
         if let Some(a) = s
             .world
-            .most_hanging(&skip, &coverage, super::support::MISSING)
+            .most_hanging(&settled, &coverage, super::support::MISSING)
         {
             let c = full.start_at(&s.world.reversed_below(a), s.world.block_scale);
             s = full.challenge(s, &ch, (&c, check_span(5)), &mut iterations, lower)?;
@@ -835,7 +831,8 @@ pub fn register(
         }
         // The stretched-end check: a limb whose last bone is too long for the one before it
         // (neither known lost, trunk, nor missing on the support above) slid one bone out.
-        let skip: Vec<bool> = skip
+        // (The support measured again when the hanging-limb check ran.)
+        let skip: Vec<bool> = settled
             .iter()
             .zip(&support)
             .map(|(&k, x)| k || x.coverage < super::support::MISSING)
