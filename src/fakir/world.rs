@@ -487,15 +487,42 @@ impl WorldSkeleton {
             return out;
         }
         let (p, last) = (line[n - 2], line[n - 1]);
+        if out.split_along(p, last, self.frames[last] * Vec3::X, self.lengths[last]) {
+            out.enforce();
+        }
+        out
+    }
+
+    /// Bones `p` and `last` (consecutive in a chain) laid along the unit direction `d` with
+    /// lengths summing to `total`, in the template's rest proportions; `false` (nothing
+    /// changed) when their rest lengths sum to zero.
+    fn split_along(&mut self, p: usize, last: usize, d: Vec3, total: f32) -> bool {
         let rest = self.rest_lengths[p] + self.rest_lengths[last];
         if rest <= 0.0 {
-            return out;
+            return false;
         }
-        let d = self.frames[last] * Vec3::X;
-        let total = self.lengths[last];
-        out.swing_onto(p, d, total * self.rest_lengths[p] / rest);
-        out.swing_onto(last, d, total * self.rest_lengths[last] / rest);
-        out.enforce();
+        self.swing_onto(p, d, total * self.rest_lengths[p] / rest);
+        self.swing_onto(last, d, total * self.rest_lengths[last] / rest);
+        true
+    }
+
+    /// The last bone `last` of a chain and the bone before it **sharing that bone's
+    /// vector** (the start of the dangling-end check): both laid along the direction of the
+    /// bone before, in the template's rest proportions, so `last` ends where the bone before
+    /// it ended; each frame swung minimally onto it; radii and everything else unchanged. A
+    /// clone when `last` has no bone before it in its chain. A fit that stretched a forearm
+    /// over the hand (its far end on the true hand's tip) leaves the hand hanging off the
+    /// statue; this start gives the hand back its place at the end of the arm.
+    pub fn split_end(&self, last: usize) -> WorldSkeleton {
+        let mut out = self.clone();
+        let t = &self.template;
+        let Some((c, k)) = t.bones[last].chain.filter(|&(_, k)| k > 0) else {
+            return out;
+        };
+        let p = t.chains[c].bones[k - 1];
+        if out.split_along(p, last, self.frames[p] * Vec3::X, self.lengths[p]) {
+            out.enforce();
+        }
         out
     }
 
@@ -604,6 +631,43 @@ impl WorldSkeleton {
             }
         }
         best.map(|(a, _)| a)
+    }
+
+    /// The chain whose **end dangles below a covered bone**: among the chains of at least
+    /// two free bones (none in `skip`), those whose last bone is judged `lost` without having
+    /// collapsed (`shrunk` false: FAKIR shrinks the bones of a lost limb onto the stump)
+    /// while the bone before it is neither lost nor under `missing` support coverage; the
+    /// least covered such last bone, or `None`. A fit that stretched a forearm over the hand
+    /// (see [`WorldSkeleton::split_end`]) leaves the hand, at full size, off the statue or
+    /// on points the forearm explains as well.
+    pub fn most_dangling_end(
+        &self,
+        skip: &[bool],
+        lost: &[bool],
+        coverage: &[f32],
+        shrunk: &[bool],
+        missing: f32,
+    ) -> Option<usize> {
+        let t = &self.template;
+        let mut best: Option<(usize, f32)> = None;
+        for c in &t.chains {
+            let n = c.bones.len();
+            if n < 2
+                || c.bones
+                    .iter()
+                    .any(|&b| skip[b] || t.bones[b].kind != BoneKind::Free)
+            {
+                continue;
+            }
+            let (p, last) = (c.bones[n - 2], c.bones[n - 1]);
+            if !lost[last] || shrunk[last] || lost[p] || coverage[p] < missing {
+                continue;
+            }
+            if best.is_none_or(|(_, v)| coverage[last] < v) {
+                best = Some((last, coverage[last]));
+            }
+        }
+        best.map(|(b, _)| b)
     }
 
     /// The frame of free bone `i` under a parent frame `parent`: its rest frame relative to
