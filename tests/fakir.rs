@@ -1904,6 +1904,18 @@ fn assert_only_these_moved(
     }
 }
 
+/// Asserts that each joint of `names` in `fit` lies within `tol` of the 1.7-high statue's
+/// height of the same joint in `truth`.
+fn assert_joints_within(fit: &Skeleton, truth: &Skeleton, names: &[&str], tol: f32, what: &str) {
+    let t = &fit.template;
+    let (a, b) = (fit.pose(), truth.pose());
+    for name in names {
+        let j = t.joint_index(name).unwrap();
+        let e = (a.joints[j] - b.joints[j]).length() / 1.7;
+        assert!(e < tol, "{what}: {name} off by {:.2}%", 100.0 * e);
+    }
+}
+
 /// Distance from `p` to the polyline through `path`.
 fn distance_to_path(p: Vec3, path: &[Vec3]) -> f32 {
     path.windows(2)
@@ -2212,12 +2224,8 @@ fn a_fit_with_an_arm_run_backwards_is_registered_again_turned_around() {
         let s = posed_human(37, 30_000);
         let fit = register_as_the_cli(&s);
         let t = &fit.skeleton.template;
-        let (a, b) = (fit.skeleton.pose(), s.truth.pose());
-        for name in ["r_shoulder", "r_elbow", "r_wrist", "r_hand_tip"] {
-            let j = t.joint_index(name).unwrap();
-            let e = (a.joints[j] - b.joints[j]).length() / 1.7;
-            assert!(e < 0.015, "seed 37: {name} off by {:.2}%", 100.0 * e);
-        }
+        let right_arm = ["r_shoulder", "r_elbow", "r_wrist", "r_hand_tip"];
+        assert_joints_within(&fit.skeleton, &s.truth, &right_arm, 0.015, "seed 37");
         let c = fit.support[t.bone_index("r_clavicle").unwrap()].coverage;
         assert!(c >= MISSING, "seed 37: right clavicle coverage {c}");
         unswapped_joint_error(&fit.skeleton, &s.truth, "seed 37");
@@ -2242,12 +2250,8 @@ fn a_fit_with_a_forearm_stretched_over_the_hand_is_registered_again_with_the_han
                 .map(|b| &t.bones[b].name)
                 .collect::<Vec<_>>()
         );
-        let (a, b) = (fit.skeleton.pose(), s.truth.pose());
-        for name in ["r_elbow", "r_wrist", "r_hand_tip"] {
-            let j = t.joint_index(name).unwrap();
-            let e = (a.joints[j] - b.joints[j]).length() / 1.7;
-            assert!(e < 0.015, "seed 10: {name} off by {:.2}%", 100.0 * e);
-        }
+        let right_arm = ["r_elbow", "r_wrist", "r_hand_tip"];
+        assert_joints_within(&fit.skeleton, &s.truth, &right_arm, 0.015, "seed 10");
         let err = unswapped_joint_error(&fit.skeleton, &s.truth, "seed 10");
         assert!(err < 0.01, "seed 10: joint error {err}");
     });

@@ -809,6 +809,9 @@ pub fn register(
     let uncovered = |support: &[BoneSupport], b: usize| {
         support[b].reach < UNCOVERED_REACH && support[b].coverage >= super::support::MISSING
     };
+    // The support and the lost bones measured on the fit as level 6 will find it, when the
+    // last check left the fit as it was (see the dangling-end check).
+    let mut measured = None;
     if slide && !limbs.is_empty() {
         s.refresh().map_err(cancelled)?;
         let (tree, rho) = match support_tree.take() {
@@ -871,9 +874,13 @@ pub fn register(
         let dangling =
             s.world
                 .most_dangling_end(&settled, &lost, &coverage, &shrunk, super::support::MISSING);
-        if let Some(b) = dangling {
-            let c = full.start_at(&s.world.split_end(b), s.world.block_scale);
-            s = full.challenge(s, &ch, (&c, check_span(7)), &mut iterations, lower)?;
+        match dangling {
+            Some(b) => {
+                let c = full.start_at(&s.world.split_end(b), s.world.block_scale);
+                s = full.challenge(s, &ch, (&c, check_span(7)), &mut iterations, lower)?;
+            }
+            // The fit stays as it is: level 6 takes this support and these lost bones.
+            None => measured = Some((support, lost)),
         }
         support_tree = Some((tree, rho));
     }
@@ -884,11 +891,14 @@ pub fn register(
             Some(t) => t,
             None => support_points(&mut s, &level0_points)?,
         };
-        let mut support = examine_support(&mut s, &tree, rho)?;
-        let missing = if opts.missing {
-            lost_limbs(&mut s, &support, &given_lost)?
-        } else {
-            given_lost.clone()
+        let (mut support, lost) = match measured {
+            Some((support, lost)) => (support, Some(lost)),
+            None => (examine_support(&mut s, &tree, rho)?, None),
+        };
+        let missing = match lost {
+            _ if !opts.missing => given_lost.clone(),
+            Some(lost) => lost,
+            None => lost_limbs(&mut s, &support, &given_lost)?,
         };
         if missing.iter().any(|&m| m) {
             iterations += settle_lost_limbs(&mut s, &missing, opts)?;

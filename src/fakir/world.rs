@@ -609,28 +609,38 @@ impl WorldSkeleton {
     /// returned as the chain's first bone, or `None`. An arm slid one joint in (see
     /// [`WorldSkeleton::slid_out`]) has a hand as long as a forearm and a hand together.
     pub fn most_stretched_end(&self, skip: &[bool], limit: f32) -> Option<usize> {
-        let t = &self.template;
         let mut best: Option<(usize, f32)> = None;
-        for c in &t.chains {
-            let n = c.bones.len();
-            if n < 3
-                || c.bones
-                    .iter()
-                    .any(|&b| skip[b] || t.bones[b].kind != BoneKind::Free)
-            {
-                continue;
-            }
-            let (p, last) = (c.bones[n - 2], c.bones[n - 1]);
+        for c in self.free_chains(skip, 3) {
+            let n = c.len();
+            let (p, last) = (c[n - 2], c[n - 1]);
             let rest = self.rest_lengths[last] / self.rest_lengths[p].max(1e-12);
             if self.lengths[p] <= 0.0 || rest <= 0.0 {
                 continue;
             }
             let ratio = self.lengths[last] / self.lengths[p] / rest;
             if ratio > limit && best.is_none_or(|(_, r)| ratio > r) {
-                best = Some((c.bones[0], ratio));
+                best = Some((c[0], ratio));
             }
         }
         best.map(|(a, _)| a)
+    }
+
+    /// The template's chains of at least `min` bones, all free and none in `skip` (the limb
+    /// chains the end checks examine), as their bones.
+    fn free_chains<'a>(
+        &'a self,
+        skip: &'a [bool],
+        min: usize,
+    ) -> impl Iterator<Item = &'a [usize]> + 'a {
+        let t = &self.template;
+        t.chains
+            .iter()
+            .map(|c| c.bones.as_slice())
+            .filter(move |c| {
+                c.len() >= min
+                    && c.iter()
+                        .all(|&b| !skip[b] && t.bones[b].kind == BoneKind::Free)
+            })
     }
 
     /// The chain whose **end dangles below a covered bone**: among the chains of at least
@@ -648,18 +658,10 @@ impl WorldSkeleton {
         shrunk: &[bool],
         missing: f32,
     ) -> Option<usize> {
-        let t = &self.template;
         let mut best: Option<(usize, f32)> = None;
-        for c in &t.chains {
-            let n = c.bones.len();
-            if n < 2
-                || c.bones
-                    .iter()
-                    .any(|&b| skip[b] || t.bones[b].kind != BoneKind::Free)
-            {
-                continue;
-            }
-            let (p, last) = (c.bones[n - 2], c.bones[n - 1]);
+        for c in self.free_chains(skip, 2) {
+            let n = c.len();
+            let (p, last) = (c[n - 2], c[n - 1]);
             if !lost[last] || shrunk[last] || lost[p] || coverage[p] < missing {
                 continue;
             }
