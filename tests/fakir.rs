@@ -616,8 +616,23 @@ fn incremental_culled_assignment_equals_a_full_recomputation() {
         let moved: Vec<usize> = (0..after.len())
             .filter(|&x| after[x] != before[x])
             .collect();
+        // A bone lost (its points relabelled, as `Solver::set_absent` does), then found again
+        // with other preference parameters: the update's shortcut must see both.
+        match step {
+            10 => {
+                incremental.enabled[5] = false;
+                incremental.relabel(0..n);
+            }
+            25 => {
+                incremental.enabled[5] = true;
+                incremental.params.cone_abs = 0.01;
+            }
+            _ => {}
+        }
         incremental.refresh(&prepared(&w), &moved);
         let mut full = mk();
+        full.enabled.clone_from(&incremental.enabled);
+        full.params = incremental.params;
         full.refresh(&prepared(&w), &all);
         assert_eq!(
             incremental.label, full.label,

@@ -15,7 +15,10 @@
 //! when a lower bound of its distance — the distance from the point to the bone's bounding
 //! sphere — could beat the point's best distance among the bones that did not move (with the
 //! cone-preference slack); otherwise that lower bound is stored, which cannot change the
-//! argmin. Work is split by point ranges so the registration can bound each
+//! argmin. **Shortcut** (exact, [`Assignment::update`]): a point whose nearest bone did not
+//! move and whose preference window no moved bone enters or leaves keeps its label without
+//! its row being scanned, so a refresh costs the moved bones' entries, not every bone's, for
+//! most points. Work is split by point ranges so the registration can bound each
 //! work unit; every loop over points is a rayon loop over fixed-size chunks and writes only its
 //! own slots, so results do not depend on the thread count.
 
@@ -68,6 +71,12 @@ pub struct Assignment {
     /// Bones that may receive points (others are ignored by the argmin).
     pub enabled: Vec<bool>,
     pub params: AssignParams,
+    /// Each point's nearest bone (the argmin before the cone preference) as of its last
+    /// [`Assignment::update`]; `u32::MAX` when its next update must take the whole row.
+    nearest: Vec<u32>,
+    /// `enabled` and `params` as `nearest` knows them.
+    state_enabled: Vec<bool>,
+    state_params: AssignParams,
 }
 
 impl Assignment {
@@ -101,6 +110,9 @@ impl Assignment {
             label: Vec::with_capacity(capacity),
             enabled: vec![true; n_bones],
             params,
+            nearest: Vec::with_capacity(capacity),
+            state_enabled: vec![true; n_bones],
+            state_params: params,
         }
     }
 
@@ -121,6 +133,7 @@ impl Assignment {
         self.cone.resize(rows, false);
         self.bound.resize(rows, false);
         self.label.resize(self.len(), 0);
+        self.nearest.resize(self.len(), u32::MAX);
     }
 
     /// Number of points.
@@ -139,14 +152,30 @@ impl Assignment {
     }
 
     /// Recomputes the distances to `bones_to_update` for the points in `range` (with the
-    /// culling described in the module docs).
-    pub fn update_columns(
+    /// culling described in the module docs) and relabels those points.
+    ///
+    /// **Shortcut** (exact; same distances and labels as recomputing every row): a point whose
+    /// nearest bone (the argmin before the cone preference, remembered from its last update)
+    /// did not move, and none of whose moved bones enters or leaves its preference window,
+    /// keeps its window — so its label — as it was; only the moved bones' entries are
+    /// written. Every other point goes through the whole row: the nearest unmoved distance for
+    /// the culling, the exact entries of the window, the argmin with the cone preference.
+    /// (When the nearest bone did not move, the nearest unmoved distance *is* the remembered
+    /// nearest distance: every other entry is exact and no smaller, or a bound beyond the
+    /// window.) Points relabelled by [`Assignment::relabel`], new points and a change of
+    /// `enabled` or `params` take the whole row at their next update.
+    pub fn update(
         &mut self,
         bones: &[PreparedBone],
         bones_to_update: &[usize],
         range: std::ops::Range<usize>,
     ) {
         let nb = self.n_bones;
+        if self.state_enabled != self.enabled || self.state_params != self.params {
+            self.nearest.fill(u32::MAX);
+            self.state_enabled.clone_from(&self.enabled);
+            self.state_params = self.params;
+        }
         let mut moved = vec![false; nb];
         for &b in bones_to_update {
             moved[b] = true;
@@ -160,77 +189,54 @@ impl Assignment {
                 (b, c, 0.5 * bone.length() + bone.r1.max(bone.r2))
             })
             .collect();
-        let enabled = &self.enabled;
-        let AssignParams {
-            cone_slack,
-            cone_abs,
-        } = self.params;
+        let row_ctx = RowContext {
+            bones,
+            moved: &moved,
+            spheres: &spheres,
+            enabled: &self.enabled,
+            params: self.params,
+        };
         let pos = &self.positions[range.clone()];
         let nrm = &self.normals[range.clone()];
         let dist = &mut self.dist[range.start * nb..range.end * nb];
         let cone = &mut self.cone[range.start * nb..range.end * nb];
         let bound = &mut self.bound[range.start * nb..range.end * nb];
+        let label = &mut self.label[range.clone()];
+        let nearest = &mut self.nearest[range.clone()];
         dist.par_chunks_mut(CHUNK * nb)
             .zip(cone.par_chunks_mut(CHUNK * nb))
             .zip(bound.par_chunks_mut(CHUNK * nb))
+            .zip(
+                label
+                    .par_chunks_mut(CHUNK)
+                    .zip(nearest.par_chunks_mut(CHUNK)),
+            )
             .zip(pos.par_chunks(CHUNK).zip(nrm.par_chunks(CHUNK)))
-            .for_each(|(((d, c), bd), (p, nn))| {
+            .for_each(|((((d, c), bd), (l, near)), (p, nn))| {
                 for k in 0..p.len() {
-                    let row = &mut d[k * nb..(k + 1) * nb];
-                    let crow = &mut c[k * nb..(k + 1) * nb];
-                    let brow = &mut bd[k * nb..(k + 1) * nb];
-                    let mut best_unmoved = f32::INFINITY;
-                    for b in 0..nb {
-                        if !moved[b] && enabled[b] && row[b] < best_unmoved {
-                            best_unmoved = row[b];
-                        }
-                    }
-                    let bound = (1.0 + cone_slack) * best_unmoved + cone_abs;
-                    for &(b, centre, radius) in &spheres {
-                        let lower = ((p[k] - centre).length() - radius).max(0.0);
-                        if lower > bound {
-                            row[b] = lower;
-                            crow[b] = false;
-                            brow[b] = true;
-                        } else {
-                            let proj = bones[b].project_constrained(p[k], nn[k]);
-                            row[b] = proj.distance;
-                            crow[b] = proj.part == Part::Cone && proj.on_surface;
-                            brow[b] = false;
-                        }
-                    }
-                    // Every entry inside the argmin's preference window must be exact (a bound
-                    // stored earlier may have become competitive when its rival moved away).
-                    loop {
-                        let best = (0..nb)
-                            .filter(|&b| enabled[b])
-                            .map(|b| row[b])
-                            .fold(f32::INFINITY, f32::min);
-                        let limit = (1.0 + cone_slack) * best + cone_abs;
-                        let Some(b) = (0..nb).find(|&b| enabled[b] && brow[b] && row[b] <= limit)
-                        else {
-                            break;
-                        };
-                        let proj = bones[b].project_constrained(p[k], nn[k]);
-                        row[b] = proj.distance;
-                        crow[b] = proj.part == Part::Cone && proj.on_surface;
-                        brow[b] = false;
+                    let mut row = Row {
+                        dist: &mut d[k * nb..(k + 1) * nb],
+                        cone: &mut c[k * nb..(k + 1) * nb],
+                        bound: &mut bd[k * nb..(k + 1) * nb],
+                    };
+                    if let Some(written) = row_ctx.shortcut(&mut row, near[k], p[k], nn[k]) {
+                        (l[k], near[k]) = row_ctx.whole_row(&mut row, written, p[k], nn[k]);
                     }
                 }
             });
     }
 
-    /// Redoes the argmin (with the cone preference) for the points in `range`.
+    /// Redoes the argmin (with the cone preference) for the points in `range`, from the
+    /// distances as they are (those points take the whole row at their next
+    /// [`Assignment::update`]).
     pub fn relabel(&mut self, range: std::ops::Range<usize>) {
         let nb = self.n_bones;
         let dist = &self.dist;
         let cone = &self.cone;
         let enabled = &self.enabled;
-        let AssignParams {
-            cone_slack,
-            cone_abs,
-        } = self.params;
+        let params = self.params;
         let start = range.start;
+        self.nearest[range.clone()].fill(u32::MAX);
         self.label[range]
             .par_chunks_mut(CHUNK)
             .enumerate()
@@ -239,30 +245,7 @@ impl Assignment {
                     let i = start + ci * CHUNK + k;
                     let row = &dist[i * nb..(i + 1) * nb];
                     let crow = &cone[i * nb..(i + 1) * nb];
-                    let mut best = u32::MAX;
-                    let mut best_d = f32::INFINITY;
-                    for b in 0..nb {
-                        if enabled[b] && row[b] < best_d {
-                            best_d = row[b];
-                            best = b as u32;
-                        }
-                    }
-                    if best != u32::MAX && !crow[best as usize] {
-                        // Prefer a cone part with a similar distance.
-                        let limit = (1.0 + cone_slack) * best_d + cone_abs;
-                        let mut alt = u32::MAX;
-                        let mut alt_d = f32::INFINITY;
-                        for b in 0..nb {
-                            if enabled[b] && crow[b] && row[b] <= limit && row[b] < alt_d {
-                                alt_d = row[b];
-                                alt = b as u32;
-                            }
-                        }
-                        if alt != u32::MAX {
-                            best = alt;
-                        }
-                    }
-                    *l = if best == u32::MAX { 0 } else { best };
+                    *l = label_of(row, crow, enabled, params).0;
                 }
             });
     }
@@ -270,8 +253,7 @@ impl Assignment {
     /// Recomputes the columns of `moved` bones for all points and relabels them.
     pub fn refresh(&mut self, bones: &[PreparedBone], moved: &[usize]) {
         let n = self.len();
-        self.update_columns(bones, moved, 0..n);
-        self.relabel(0..n);
+        self.update(bones, moved, 0..n);
     }
 
     /// Distance of point `i` to bone `b` (as last computed).
@@ -310,4 +292,143 @@ impl Assignment {
             .collect();
         partial.iter().sum::<f64>() / n as f64
     }
+}
+
+/// The entries of one point's row.
+struct Row<'a> {
+    dist: &'a mut [f32],
+    cone: &'a mut [bool],
+    bound: &'a mut [bool],
+}
+
+/// What every row of an [`Assignment::update`] shares.
+struct RowContext<'a> {
+    bones: &'a [PreparedBone],
+    moved: &'a [bool],
+    /// The moved bones with their bounding spheres (centre, radius).
+    spheres: &'a [(usize, Vec3, f32)],
+    enabled: &'a [bool],
+    params: AssignParams,
+}
+
+impl RowContext<'_> {
+    /// The preference window's limit for the nearest distance `best`.
+    #[inline]
+    fn limit(&self, best: f32) -> f32 {
+        (1.0 + self.params.cone_slack) * best + self.params.cone_abs
+    }
+
+    /// Writes the moved bones' entries of `row`: the exact distance, or the lower bound of the
+    /// bounding sphere when that cannot come within `limit` of the nearest unmoved distance.
+    #[inline]
+    fn write_moved(&self, row: &mut Row, limit: f32, p: Vec3, n: Vec3) {
+        for &(b, centre, radius) in self.spheres {
+            let lower = ((p - centre).length() - radius).max(0.0);
+            if lower > limit {
+                row.dist[b] = lower;
+                row.cone[b] = false;
+                row.bound[b] = true;
+            } else {
+                let proj = self.bones[b].project_constrained(p, n);
+                row.dist[b] = proj.distance;
+                row.cone[b] = proj.part == Part::Cone && proj.on_surface;
+                row.bound[b] = false;
+            }
+        }
+    }
+
+    /// The shortcut of [`Assignment::update`]: `None` when the point's label and window stay
+    /// as they were (its moved entries written); `Some(written)` when the whole row must be
+    /// redone, `written` telling whether the moved entries are already written (just as
+    /// [`RowContext::whole_row`] would write them).
+    #[inline]
+    fn shortcut(&self, row: &mut Row, nearest: u32, p: Vec3, n: Vec3) -> Option<bool> {
+        if nearest == u32::MAX || self.moved[nearest as usize] {
+            return Some(false);
+        }
+        let limit = self.limit(row.dist[nearest as usize]);
+        // A moved, enabled bone inside the window before.
+        let inside = |row: &Row| {
+            self.spheres
+                .iter()
+                .any(|&(b, _, _)| self.enabled[b] && row.dist[b] <= limit)
+        };
+        if inside(row) {
+            return Some(false);
+        }
+        self.write_moved(row, limit, p, n);
+        // Or inside it now.
+        inside(row).then_some(true)
+    }
+
+    /// Redoes the whole row of a point: moved entries (culled against the nearest unmoved
+    /// distance), exact entries throughout the window, then the label with the cone
+    /// preference (`written`: the moved entries are already written, by the shortcut, whose
+    /// nearest distance was the nearest unmoved one). Returns the label and the nearest bone
+    /// (`u32::MAX` when none).
+    fn whole_row(&self, row: &mut Row, written: bool, p: Vec3, n: Vec3) -> (u32, u32) {
+        let nb = row.dist.len();
+        let (enabled, moved) = (self.enabled, self.moved);
+        if !written {
+            let mut best_unmoved = f32::INFINITY;
+            for b in 0..nb {
+                if !moved[b] && enabled[b] && row.dist[b] < best_unmoved {
+                    best_unmoved = row.dist[b];
+                }
+            }
+            self.write_moved(row, self.limit(best_unmoved), p, n);
+        }
+        // Every entry inside the argmin's preference window must be exact (a bound stored
+        // earlier may have become competitive when its rival moved away).
+        loop {
+            let best = (0..nb)
+                .filter(|&b| enabled[b])
+                .map(|b| row.dist[b])
+                .fold(f32::INFINITY, f32::min);
+            let limit = self.limit(best);
+            let Some(b) = (0..nb).find(|&b| enabled[b] && row.bound[b] && row.dist[b] <= limit)
+            else {
+                break;
+            };
+            let proj = self.bones[b].project_constrained(p, n);
+            row.dist[b] = proj.distance;
+            row.cone[b] = proj.part == Part::Cone && proj.on_surface;
+            row.bound[b] = false;
+        }
+        label_of(row.dist, row.cone, enabled, self.params)
+    }
+}
+
+/// The label of a point from its row: the nearest enabled bone, or the nearest enabled cone
+/// part within the preference window when the nearest projection is not on a cone part (0
+/// when no bone is enabled or every distance is infinite). Also returns the nearest bone
+/// (`u32::MAX` when none).
+#[inline]
+fn label_of(row: &[f32], crow: &[bool], enabled: &[bool], params: AssignParams) -> (u32, u32) {
+    let nb = row.len();
+    let mut best = u32::MAX;
+    let mut best_d = f32::INFINITY;
+    for b in 0..nb {
+        if enabled[b] && row[b] < best_d {
+            best_d = row[b];
+            best = b as u32;
+        }
+    }
+    let nearest = best;
+    if best != u32::MAX && !crow[best as usize] {
+        // Prefer a cone part with a similar distance.
+        let limit = (1.0 + params.cone_slack) * best_d + params.cone_abs;
+        let mut alt = u32::MAX;
+        let mut alt_d = f32::INFINITY;
+        for b in 0..nb {
+            if enabled[b] && crow[b] && row[b] <= limit && row[b] < alt_d {
+                alt_d = row[b];
+                alt = b as u32;
+            }
+        }
+        if alt != u32::MAX {
+            best = alt;
+        }
+    }
+    (if best == u32::MAX { 0 } else { best }, nearest)
 }

@@ -394,14 +394,26 @@ impl OccupancyTerm<'_> {
     fn residuals(&self, w: &WorldSkeleton) -> Vec<(f64, Vec3, f64)> {
         let bones = w.bones();
         let prepared: Vec<_> = bones.iter().map(|b| b.prepare()).collect();
+        // Bounding spheres (centre, squared radius): a sample outside one is not inside that
+        // bone (its signed distance is positive, far above `-tol`).
+        let spheres: Vec<(Vec3, f32)> = bones
+            .iter()
+            .map(|b| {
+                let r = 0.5 * b.length() + b.r1.max(b.r2);
+                (0.5 * (b.c1 + b.c2), r * r)
+            })
+            .collect();
         let mut out = Vec::with_capacity(self.bones.len() * OCCUPANCY_SAMPLES);
         for (bi, &b) in self.bones.iter().enumerate() {
             let tol = 1e-4 * (bones[b].length() + bones[b].r1 + bones[b].r2);
             for s in occupancy_samples(w, &bones, b) {
                 let hidden = prepared
                     .iter()
+                    .zip(&spheres)
                     .enumerate()
-                    .any(|(o, pb)| o != b && pb.sdf_fast(s) < -tol);
+                    .any(|(o, (pb, c))| {
+                        o != b && (s - c.0).length_squared() <= c.1 && pb.sdf_fast(s) < -tol
+                    });
                 if hidden {
                     out.push((0.0, Vec3::ZERO, 0.0));
                     continue;

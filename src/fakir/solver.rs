@@ -347,9 +347,7 @@ impl<'p> Solver<'p> {
         self.activity.phase = "assignment";
         while start < n {
             let end = (start + slice).min(n);
-            self.assignment
-                .update_columns(&prepared, &moved, start..end);
-            self.assignment.relabel(start..end);
+            self.assignment.update(&prepared, &moved, start..end);
             start = end;
             self.unit()?;
         }
