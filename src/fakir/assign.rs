@@ -312,10 +312,9 @@ struct RowContext<'a> {
 }
 
 impl RowContext<'_> {
-    /// The preference window's limit for the nearest distance `best`.
     #[inline]
     fn limit(&self, best: f32) -> f32 {
-        (1.0 + self.params.cone_slack) * best + self.params.cone_abs
+        window_limit(self.params, best)
     }
 
     /// Writes the moved bones' entries of `row`: the exact distance, or the lower bound of the
@@ -399,6 +398,13 @@ impl RowContext<'_> {
     }
 }
 
+/// The preference window's limit for the nearest distance `best`: the distances a cone part
+/// may have and still be preferred ("similar", see the module docs).
+#[inline]
+fn window_limit(params: AssignParams, best: f32) -> f32 {
+    (1.0 + params.cone_slack) * best + params.cone_abs
+}
+
 /// The label of a point from its row: the nearest enabled bone, or the nearest enabled cone
 /// part within the preference window when the nearest projection is not on a cone part (0
 /// when no bone is enabled or every distance is infinite). Also returns the nearest bone
@@ -417,7 +423,7 @@ fn label_of(row: &[f32], crow: &[bool], enabled: &[bool], params: AssignParams) 
     let nearest = best;
     if best != u32::MAX && !crow[best as usize] {
         // Prefer a cone part with a similar distance.
-        let limit = (1.0 + params.cone_slack) * best_d + params.cone_abs;
+        let limit = window_limit(params, best_d);
         let mut alt = u32::MAX;
         let mut alt_d = f32::INFINITY;
         for b in 0..nb {
