@@ -475,3 +475,29 @@ fn rotation_arc_keeps_small_angles() {
     assert!((rotation_arc(a, -a) * a + a).length() < 1e-5);
     assert_eq!(rotation_arc(a, a), pygmalion::math::Quat::IDENTITY);
 }
+
+#[test]
+fn the_bounding_sphere_holds_every_surface_sample() {
+    let mut rng = Rng::new(17);
+    for (c1, r1, c2, r2) in [
+        (Vec3::ZERO, 0.1, Vec3::new(0.0, 1.0, 0.0), 0.3),
+        (
+            Vec3::new(1.0, 2.0, 3.0),
+            0.5,
+            Vec3::new(1.2, 2.1, 2.9),
+            0.05,
+        ),
+        (Vec3::ZERO, 0.4, Vec3::new(0.05, 0.0, 0.0), 0.1),
+    ] {
+        let bone = Bone::new(c1, r1, c2, r2);
+        let (centre, radius) = bone.bounding_sphere();
+        let pb = bone.prepare();
+        let mut farthest = 0.0f32;
+        for _ in 0..2000 {
+            farthest = farthest.max((pb.sample_surface(&mut rng).0 - centre).length());
+        }
+        // Within it, and tight: the far cap reaches it along the axis.
+        assert!(farthest <= radius * (1.0 + 1e-5), "{farthest} > {radius}");
+        assert!(farthest >= 0.9 * radius, "{farthest} much inside {radius}");
+    }
+}

@@ -184,9 +184,8 @@ impl Assignment {
         let spheres: Vec<(usize, Vec3, f32)> = bones_to_update
             .iter()
             .map(|&b| {
-                let bone = &bones[b].bone;
-                let c = 0.5 * (bone.c1 + bone.c2);
-                (b, c, 0.5 * bone.length() + bone.r1.max(bone.r2))
+                let (c, r) = bones[b].bone.bounding_sphere();
+                (b, c, r)
             })
             .collect();
         let row_ctx = RowContext {

@@ -399,8 +399,8 @@ impl OccupancyTerm<'_> {
         let spheres: Vec<(Vec3, f32)> = bones
             .iter()
             .map(|b| {
-                let r = 0.5 * b.length() + b.r1.max(b.r2);
-                (0.5 * (b.c1 + b.c2), r * r)
+                let (c, r) = b.bounding_sphere();
+                (c, r * r)
             })
             .collect();
         let mut out = Vec::with_capacity(self.bones.len() * OCCUPANCY_SAMPLES);

@@ -865,16 +865,7 @@ fn seed_eval(
     ctx: &SeedContext,
     seed: u64,
 ) -> (Vec<f32>, f32) {
-    let spheres: Vec<(Vec3, f32)> = limb
-        .iter()
-        .map(|b| {
-            let c = 0.5 * (b.bone.c1 + b.bone.c2);
-            (
-                c,
-                0.5 * (b.bone.c2 - b.bone.c1).length() + b.bone.r1.max(b.bone.r2),
-            )
-        })
-        .collect();
+    let spheres: Vec<(Vec3, f32)> = limb.iter().map(|b| b.bone.bounding_sphere()).collect();
     let dist: Vec<f32> = ctx
         .idx
         .iter()

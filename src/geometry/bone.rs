@@ -175,6 +175,18 @@ impl Bone {
         (self.c2 - self.c1).length()
     }
 
+    /// A sphere holding the whole bone: centred midway between `c1` and `c2`, of radius
+    /// `l/2 + max(r1, r2)` (every sphere of the bone is centred on the segment, within `l/2` of
+    /// its middle). Points outside it are outside the bone, and the distance to it is a lower
+    /// bound of the distance to the bone's surface (the culling of the assignment and the
+    /// seeding, the hidden-sample test of the occupancy term).
+    pub fn bounding_sphere(&self) -> (Vec3, f32) {
+        (
+            0.5 * (self.c1 + self.c2),
+            0.5 * self.length() + self.r1.max(self.r2),
+        )
+    }
+
     /// A size scale for tolerances: `l + r1 + r2`.
     pub fn size(&self) -> f32 {
         self.length() + self.r1 + self.r2
