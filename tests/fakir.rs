@@ -264,6 +264,78 @@ fn lm_gradient_matches_finite_differences_of_the_energy() {
     }
 }
 
+/// The support's mean spacing summed in work-unit slices (`add_spacings`, as the
+/// registration does) is `mean_spacing` bit for bit, whatever the slices (multiples of
+/// `SPACING_CHUNK`); on a small cloud it is the brute-force mean nearest-neighbour distance
+/// (relative tolerance 1e-5), and a cloud over 20k points is sampled every
+/// `n / 20 000`-th point, each sample counted once (against a direct loop, relative 1e-9).
+#[test]
+fn the_mean_spacing_summed_in_slices_is_the_mean_spacing_bit_for_bit() {
+    use pygmalion::fakir::support::{SPACING_CHUNK, add_spacings, mean_spacing, spacing_samples};
+    let tree_of = |p: &[Vec3]| {
+        let arr: Vec<[f32; 3]> = p.iter().map(|v| v.to_array()).collect();
+        kiddo::ImmutableKdTree::<f32, 3>::new_from_slice(&arr).unwrap()
+    };
+    // Brute force on 2000 points.
+    let small = chain4(2_000, 3, 0.5, 0.0, vec![]).unwrap().cloud.positions;
+    let brute: f64 = small
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            small
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .map(|(_, q)| p.distance(*q) as f64)
+                .fold(f64::INFINITY, f64::min)
+        })
+        .sum::<f64>()
+        / small.len() as f64;
+    let m = mean_spacing(&small, &tree_of(&small)) as f64;
+    assert!(
+        (m - brute).abs() <= 1e-5 * brute,
+        "mean spacing {m} against brute force {brute}"
+    );
+    // Slices of a 45k-point cloud (every second point sampled).
+    let big = chain4(45_000, 5, 0.5, 0.0, vec![]).unwrap().cloud.positions;
+    let tree = tree_of(&big);
+    let n = spacing_samples(big.len());
+    assert_eq!(n, 22_500);
+    let mut whole = 0.0f64;
+    add_spacings(&big, &tree, 0..n, &mut whole);
+    // Every second point, each counted once.
+    let direct: f64 = (0..n)
+        .map(|k| {
+            let two = std::num::NonZero::new(2).unwrap();
+            let nn = tree
+                .query(&big[2 * k].to_array())
+                .nearest_n::<kiddo::SquaredEuclidean<f32>>(two)
+                .execute();
+            nn[1].distance.sqrt() as f64
+        })
+        .sum();
+    assert!(
+        (whole - direct).abs() <= 1e-9 * direct,
+        "{whole} against {direct}"
+    );
+    assert_eq!(
+        mean_spacing(&big, &tree).to_bits(),
+        ((whole / n as f64) as f32).to_bits()
+    );
+    for slice in [
+        SPACING_CHUNK,
+        3 * SPACING_CHUNK,
+        8 * SPACING_CHUNK,
+        100 * SPACING_CHUNK,
+    ] {
+        let mut sum = 0.0f64;
+        for start in (0..n).step_by(slice) {
+            add_spacings(&big, &tree, start..start + slice, &mut sum);
+        }
+        assert_eq!(sum.to_bits(), whole.to_bits(), "slices of {slice}");
+    }
+}
+
 /// The LM sums cut into work-unit slices (`NormalAccumulator`, `EnergyAccumulator`) are the
 /// unsliced sums bit for bit, whatever the slice size, so pausing between slices cannot
 /// change a registration.

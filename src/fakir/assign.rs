@@ -267,11 +267,22 @@ impl Assignment {
 
     /// Indices of the points assigned to each bone, in increasing order.
     pub fn members(&self) -> Vec<Vec<u32>> {
-        let mut m = vec![Vec::new(); self.n_bones];
+        let mut m = Vec::new();
+        self.members_into(&mut m);
+        m
+    }
+
+    /// [`Assignment::members`] written into `m`, whose lists keep their capacity (the solver
+    /// rebuilds them after every refresh without allocating once they have grown).
+    pub fn members_into(&self, m: &mut Vec<Vec<u32>>) {
+        m.resize_with(self.n_bones, Vec::new);
+        m.truncate(self.n_bones);
+        for list in m.iter_mut() {
+            list.clear();
+        }
         for (i, &l) in self.label.iter().enumerate() {
             m[l as usize].push(i as u32);
         }
-        m
     }
 
     /// Mean distance of the points to their bones (thesis eq. 2.16), summed in a fixed order.

@@ -210,10 +210,14 @@
 //! units**; after each one the solver calls a [`Pause`] hook. A unit is bounded by the points
 //! it touches, not by the statue's size: a slice of an assignment refresh; an LM iteration's
 //! normal equations, its trial step and an energy evaluation, each cut into slices of at most
-//! [`super::lm::SLICE_POINTS`] points; a group of seeding candidates; and, between solvers,
-//! the set-up (placing the candidates, starting a solver, building the level-1 assignment in
-//! slices of `LEVEL1_SLICE` points). `bench --only fakir/unit_100k` measures the longest unit
-//! on 100k points (2.0 ms, the set-up, each unit at its shortest of four runs).
+//! [`super::lm::SLICE_POINTS`] points; the members' lists rebuilt after a refresh; a group of
+//! seeding candidates; the support's k-d tree, its mean spacing in slices of
+//! `SPACING_SLICE` points, and one bone's support; and, between solvers, the set-up (placing
+//! the candidates; starting a solver in three units: what the caller did since its last
+//! unit, the assignment's copy of the points, the solver's own k-d tree; building the level-1
+//! assignment in slices of `LEVEL1_SLICE` points). `bench --only fakir/unit_100k` measures
+//! the longest unit on 100k points: 1.62 ms (a chain fit's first slice at level 1; set-up
+//! 1.53 ms, support 0.66 ms), each unit at its shortest of four runs.
 //! [`Registration::step`] runs the algorithm on a worker thread that stops at the first unit
 //! boundary after the budget is spent and waits there for the next `step`;
 //! [`Registration::run_to_convergence`] runs it with a hook that never pauses. Pausing never
@@ -230,7 +234,8 @@ use super::init::{Candidate, Init, candidates, rescaled};
 use super::schedule::{ScheduleSettings, register_skeleton};
 use super::solver::{Activity, Cancelled, NoPause, Pause, Solver, SolverSettings, template_extent};
 use super::support::{
-    BoneSupport, SupportExam, collapse, complete_with, lost_from_names, mean_spacing, mirrors,
+    BoneSupport, SPACING_CHUNK, SupportExam, add_spacings, collapse, complete_with,
+    lost_from_names, mirrors, spacing_samples,
 };
 use super::world::WorldSkeleton;
 use crate::anatomy::template::BoneKind;
@@ -464,8 +469,9 @@ fn subsample(n: usize, k: usize, seed: u64) -> Vec<u32> {
     out
 }
 
-/// Points added to the level-1 assignment per work unit.
-const LEVEL1_SLICE: usize = 16_384;
+/// Points added to the level-1 assignment per work unit: their rows (22 distances, flags) are
+/// fresh memory, written for the first time, and 16,384 points took up to 4 ms.
+const LEVEL1_SLICE: usize = 4_096;
 
 /// Share of the progress fraction given to the candidates' short registrations.
 const INIT_SHARE: f32 = 0.15;
@@ -1177,10 +1183,20 @@ fn support_points(
     let arr: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
     let tree = kiddo::ImmutableKdTree::<f32, 3>::new_from_slice(&arr)
         .map_err(|e| Error::input(format!("support: k-d tree: {e:?}")))?;
-    let rho = mean_spacing(points, &tree);
     s.unit().map_err(cancelled)?;
-    Ok((tree, rho))
+    // The mean spacing (`mean_spacing`, the same bytes) in slices of `SPACING_SLICE` points.
+    let n = spacing_samples(points.len());
+    let mut sum = 0.0;
+    for start in (0..n).step_by(SPACING_SLICE) {
+        add_spacings(points, &tree, start..start + SPACING_SLICE, &mut sum);
+        s.unit().map_err(cancelled)?;
+    }
+    Ok((tree, (sum / n.max(1) as f64) as f32))
 }
+
+/// Points whose nearest-neighbour distance one work unit of [`support_points`] measures
+/// (a multiple of [`SPACING_CHUNK`]): 8000 take about 2 ms on this 2-core machine.
+const SPACING_SLICE: usize = 8 * SPACING_CHUNK;
 
 /// The support of every bone of the fit `s` ([`super::support`]) on the points of `tree`
 /// (mean spacing `rho`, [`support_points`]): one work unit for the set-up, then one per bone.
@@ -1408,7 +1424,8 @@ struct FullFit {
 
 impl FullRun<'_> {
     /// A solver for `world` on the level-0 points, its progress at `fraction` within `span`,
-    /// after the set-up unit (building the solver's k-d tree is a unit of its own).
+    /// after three set-up units: whatever the caller did since its last unit, the
+    /// assignment's copy of the points, then the solver's k-d tree and spacing.
     fn start<'p>(
         &self,
         world: WorldSkeleton,
@@ -1417,7 +1434,9 @@ impl FullRun<'_> {
         fraction: f32,
         span: (f32, f32),
     ) -> Result<Solver<'p>> {
+        pause.unit(None).map_err(cancelled)?;
         let a0 = assignment_of(self.positions, self.normals, self.idx, self.nb, self.params);
+        pause.unit(None).map_err(cancelled)?;
         let mut s = Solver::new(world, a0, scale, self.opts.solver.clone(), pause);
         s.free_root = self.free_root;
         s.start_absent(self.lost);

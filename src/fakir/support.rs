@@ -64,21 +64,63 @@ pub struct BoneSupport {
     pub shrunk: bool,
 }
 
-/// Mean nearest-neighbour spacing of a cloud (over at most 20k points).
+/// Mean nearest-neighbour spacing of a cloud (over at most 20k points): [`add_spacings`] over
+/// every sampled point, divided by their number.
 pub fn mean_spacing(points: &[Vec3], tree: &ImmutableKdTree<f32, 3>) -> f32 {
-    let step = (points.len() / 20_000).max(1);
-    let idx: Vec<usize> = (0..points.len()).step_by(step).collect();
-    let sum: f64 = idx
-        .par_iter()
-        .map(|&i| {
-            let r = tree
-                .query(&points[i].to_array())
-                .nearest_n::<SquaredEuclidean<f32>>(std::num::NonZero::new(2).expect("2 > 0"))
-                .execute();
-            r.get(1).map_or(0.0, |n| n.distance.sqrt() as f64)
+    let n = spacing_samples(points.len());
+    let mut sum = 0.0;
+    add_spacings(points, tree, 0..n, &mut sum);
+    (sum / n.max(1) as f64) as f32
+}
+
+/// How many points [`mean_spacing`] averages over: every `(n / 20 000).max(1)`-th point.
+pub fn spacing_samples(n: usize) -> usize {
+    n.div_ceil(spacing_step(n))
+}
+
+fn spacing_step(n: usize) -> usize {
+    (n / 20_000).max(1)
+}
+
+/// Sampled points per parallel chunk of [`add_spacings`].
+pub const SPACING_CHUNK: usize = 256;
+
+/// Adds to `sum` the nearest-neighbour distances of the sampled points `range` (indices among
+/// the [`spacing_samples`] points that [`mean_spacing`] averages over), so that a caller can
+/// cut the pass into work units. The distances are summed in fixed chunks of
+/// [`SPACING_CHUNK`] sampled points (counted from 0), and the chunks' sums are added to `sum`
+/// in order: slices whose bounds are multiples of the chunk give the same bytes as one call
+/// over everything, on any number of threads.
+pub fn add_spacings(
+    points: &[Vec3],
+    tree: &ImmutableKdTree<f32, 3>,
+    range: std::ops::Range<usize>,
+    sum: &mut f64,
+) {
+    let step = spacing_step(points.len());
+    let end = range.end.min(spacing_samples(points.len()));
+    let start = range.start.min(end);
+    let chunk_sums: Vec<f64> = (start / SPACING_CHUNK..end.div_ceil(SPACING_CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            let from = (c * SPACING_CHUNK).max(start);
+            let to = ((c + 1) * SPACING_CHUNK).min(end);
+            (from..to)
+                .map(|k| {
+                    let r = tree
+                        .query(&points[k * step].to_array())
+                        .nearest_n::<SquaredEuclidean<f32>>(
+                            std::num::NonZero::new(2).expect("2 > 0"),
+                        )
+                        .execute();
+                    r.get(1).map_or(0.0, |n| n.distance.sqrt() as f64)
+                })
+                .sum::<f64>()
         })
-        .sum();
-    (sum / idx.len().max(1) as f64) as f32
+        .collect();
+    for c in chunk_sums {
+        *sum += c;
+    }
 }
 
 /// The mirror bone of every bone: the bone at the same position in the mirror chain, and for
