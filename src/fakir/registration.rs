@@ -212,12 +212,13 @@
 //! normal equations, its trial step and an energy evaluation, each cut into slices of at most
 //! [`super::lm::SLICE_POINTS`] points; the members' lists rebuilt after a refresh; a group of
 //! seeding candidates; the support's k-d tree, its mean spacing in slices of
-//! `SPACING_SLICE` points, and one bone's support; and, between solvers, the set-up (placing
+//! `SPACING_SLICE` points, and one examination of a bone's support; and, between solvers, the set-up (placing
 //! the candidates; starting a solver in three units: what the caller did since its last
 //! unit, the assignment's copy of the points, the solver's own k-d tree; building the level-1
 //! assignment in slices of `LEVEL1_SLICE` points). `bench --only fakir/unit_100k` measures
 //! the longest unit on 100k points: 1.62 ms (a chain fit's first slice at level 1; set-up
-//! 1.53 ms, support 0.66 ms), each unit at its shortest of four runs.
+//! 1.53 ms, support 0.66 ms), each unit at its shortest of four runs; `fakir/unit_100k_plinth`
+//! 1.51 ms (set-up; support 1.29 ms, a shrunk bone's two examinations being two units).
 //! [`Registration::step`] runs the algorithm on a worker thread that stops at the first unit
 //! boundary after the budget is spent and waits there for the next `step`;
 //! [`Registration::run_to_convergence`] runs it with a hook that never pauses. Pausing never
@@ -234,7 +235,7 @@ use super::init::{Candidate, Init, candidates, rescaled};
 use super::schedule::{ScheduleSettings, register_skeleton};
 use super::solver::{Activity, Cancelled, NoPause, Pause, Solver, SolverSettings, template_extent};
 use super::support::{
-    BoneSupport, SPACING_CHUNK, SupportExam, add_spacings, collapse, complete_with,
+    BoneSupport, SPACING_CHUNK, SupportExam, add_spacings, better, collapse, complete_with,
     lost_from_names, mirrors, spacing_samples,
 };
 use super::world::WorldSkeleton;
@@ -1199,7 +1200,8 @@ fn support_points(
 const SPACING_SLICE: usize = 8 * SPACING_CHUNK;
 
 /// The support of every bone of the fit `s` ([`super::support`]) on the points of `tree`
-/// (mean spacing `rho`, [`support_points`]): one work unit for the set-up, then one per bone.
+/// (mean spacing `rho`, [`support_points`]): one work unit for the set-up, then one per
+/// examination of a bone ([`SupportExam::tries`]: two for a shrunk bone).
 fn examine_support(
     s: &mut Solver,
     tree: &kiddo::ImmutableKdTree<f32, 3>,
@@ -1211,8 +1213,12 @@ fn examine_support(
     s.unit().map_err(cancelled)?;
     let mut out = Vec::with_capacity(fitted.bones.len());
     for k in 0..fitted.bones.len() {
-        out.push(exam.bone(k));
-        s.unit().map_err(cancelled)?;
+        let mut best = (0.0, 0.0);
+        for &e in exam.tries(k) {
+            best = better(best, exam.coverage(k, e));
+            s.unit().map_err(cancelled)?;
+        }
+        out.push(exam.support(k, best));
     }
     Ok(out)
 }

@@ -384,15 +384,31 @@ impl<'a> SupportExam<'a> {
         }
     }
 
-    /// The support of bone `k`.
+    /// The support of bone `k`: the best of its [`SupportExam::tries`].
     pub fn bone(&self, k: usize) -> BoneSupport {
-        // A bone that is not shrunk is examined as fitted (resizing another bone would
-        // move it).
-        let tries: &[usize] = if self.shrunk[k] { &[1, 2] } else { &[0] };
-        let (coverage, reach) = tries
+        let best = self
+            .tries(k)
             .iter()
-            .map(|&e| coverage_of(k, &self.exams[e].0, &self.exams[e].1, self.tree, self.rho))
-            .fold((0.0f32, 0.0f32), |a, b| if b.0 > a.0 { b } else { a });
+            .fold((0.0, 0.0), |best, &e| better(best, self.coverage(k, e)));
+        self.support(k, best)
+    }
+
+    /// The examinations bone `k` goes through (indices for [`SupportExam::coverage`]): a bone
+    /// that is not shrunk is examined as fitted (resizing another bone would move it); a
+    /// shrunk one at its expected size, along its fitted direction and along its completion.
+    pub fn tries(&self, k: usize) -> &'static [usize] {
+        if self.shrunk[k] { &[1, 2] } else { &[0] }
+    }
+
+    /// Coverage and reach of bone `k` in examination `e` (one of its [`SupportExam::tries`]).
+    /// The registration makes each one a work unit.
+    pub fn coverage(&self, k: usize, e: usize) -> (f32, f32) {
+        coverage_of(k, &self.exams[e].0, &self.exams[e].1, self.tree, self.rho)
+    }
+
+    /// The support of bone `k` from the best (coverage, reach) of its tries, folded from
+    /// `(0, 0)` with [`better`].
+    pub fn support(&self, k: usize, (coverage, reach): (f32, f32)) -> BoneSupport {
         BoneSupport {
             bone: self.fitted.template.bones[k].name.clone(),
             coverage,
@@ -402,6 +418,12 @@ impl<'a> SupportExam<'a> {
             shrunk: self.shrunk[k],
         }
     }
+}
+
+/// The better of two (coverage, reach) examinations of a bone: the higher coverage, the
+/// first on a tie.
+pub fn better(a: (f32, f32), b: (f32, f32)) -> (f32, f32) {
+    if b.0 > a.0 { b } else { a }
 }
 
 /// Coverage and reach of bone `k` of a posed skeleton (see the module docs). The samples
