@@ -144,7 +144,8 @@
 //!    registrations.
 //!
 //!    **Hanging-limb and stretched-end checks** (our choice; same option, run after the
-//!    slid checks on the same support): two faults of the arms. A fit can run an arm
+//!    slid checks, on their support measured again after the slid-limb check, whose fit may
+//!    have won): two faults of the arms. A fit can run an arm
 //!    backwards — the clavicle out to the hand across empty space, the arm coming back to
 //!    the shoulder — or sit it one joint in — the elbow on the shoulder, the wrist on the
 //!    elbow, the hand stretched over the forearm and the hand. *Hanging*: a limb bone under
@@ -844,6 +845,9 @@ pub fn register(
         {
             let c = full.start_at(&s.world.slid_down(b), s.world.block_scale);
             s = full.challenge(s, &ch, (&c, check_span(4)), &mut iterations, lower)?;
+            // The hanging-limb check reads the support of the fit as it now is.
+            s.refresh().map_err(cancelled)?;
+            support = examine_support(&mut s, &tree, rho)?;
         }
         // The hanging-limb check: a limb bone across empty space with the rest of its chain
         // on the scan (neither known lost nor trunk) turns the chain below it around.
