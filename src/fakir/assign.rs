@@ -276,7 +276,6 @@ impl Assignment {
     /// rebuilds them after every refresh without allocating once they have grown).
     pub fn members_into(&self, m: &mut Vec<Vec<u32>>) {
         m.resize_with(self.n_bones, Vec::new);
-        m.truncate(self.n_bones);
         for list in m.iter_mut() {
             list.clear();
         }

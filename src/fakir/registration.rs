@@ -212,11 +212,11 @@
 //! it touches, not by the statue's size: a slice of an assignment refresh; an LM iteration's
 //! normal equations, its trial step and an energy evaluation, each cut into slices of at most
 //! [`super::lm::SLICE_POINTS`] points; the members' lists rebuilt after a refresh; a group of
-//! seeding candidates; the support's k-d tree, its mean spacing in slices of
-//! `SPACING_SLICE` points, and one examination of a bone's support; and, between solvers, the set-up (placing
-//! the candidates; starting a solver in three units: what the caller did since its last
-//! unit, the assignment's copy of the points, the solver's own k-d tree; building the level-1
-//! assignment in slices of `LEVEL1_SLICE` points). `bench --only fakir/unit_100k` measures
+//! seeding candidates; the support's k-d tree, its mean spacing in slices of `SPACING_SLICE`
+//! points, and one examination of a bone's support; and, between solvers, the set-up
+//! (placing the candidates; starting a solver in three units: what the caller did since its
+//! last unit, the assignment's copy of the points, the solver's own k-d tree; building the
+//! level-1 assignment in slices of `LEVEL1_SLICE` points). `bench --only fakir/unit_100k` measures
 //! the longest unit on 100k points: 1.62 ms (a chain fit's first slice at level 1; set-up
 //! 1.53 ms, support 0.66 ms), each unit at its shortest of four runs; `fakir/unit_100k_plinth`
 //! 1.51 ms (set-up; support 1.29 ms, a shrunk bone's two examinations being two units).

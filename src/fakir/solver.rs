@@ -354,8 +354,8 @@ impl<'p> Solver<'p> {
         }
         self.assigned_bones = bones;
         self.assignment.members_into(&mut self.members);
-        // The members' lists are a pass over every point (0.3 ms on 100k): a unit of their
-        // own, so the unit after the refresh starts with them built.
+        // The members' lists are a pass over every point: a unit of their own, so the unit
+        // after the refresh starts with them built.
         self.unit()?;
         self.activity.phase = prev_phase;
         Ok(())
