@@ -2106,7 +2106,7 @@ fn splitting_a_limb_end_lays_the_last_two_bones_along_the_one_before() {
 }
 
 #[test]
-fn the_dangling_end_is_a_lost_full_size_last_bone_below_a_covered_one() {
+fn the_dangling_end_is_a_lost_last_bone_below_a_covered_or_folded_up_one() {
     use pygmalion::fakir::support::MISSING;
     let s = posed_human(3, 2_000);
     let t = s.truth.template.clone();
@@ -2156,6 +2156,25 @@ fn the_dangling_end_is_a_lost_full_size_last_bone_below_a_covered_one() {
     bare[b("r_forearm")] = 0.1;
     assert_eq!(
         w.most_dangling_end(&none, &lost, &bare, &none, MISSING),
+        None
+    );
+    // An uncovered forearm that collapsed too, kept by the lost-limb rules, above a lost hand
+    // (collapsed or not) is an arm folded up on itself (seed 15: upper arm, forearm and hand
+    // shrunk, the forearm at 0.08 coverage, the hand lost): its hand dangles. A covered
+    // collapsed forearm above a collapsed hand is a cut at the wrist: it does not.
+    let folded = mark(&["r_upper_arm", "r_forearm", "r_hand"]);
+    assert_eq!(
+        w.most_dangling_end(&none, &lost, &bare, &folded, MISSING),
+        Some(b("r_hand"))
+    );
+    let forearm_only = mark(&["r_forearm"]);
+    assert_eq!(
+        w.most_dangling_end(&none, &lost, &bare, &forearm_only, MISSING),
+        Some(b("r_hand"))
+    );
+    let wrist_cut = mark(&["r_forearm", "r_hand"]);
+    assert_eq!(
+        w.most_dangling_end(&none, &lost, &coverage, &wrist_cut, MISSING),
         None
     );
     let forearm = mark(&["r_forearm"]);
@@ -2337,6 +2356,26 @@ fn a_fit_with_a_forearm_stretched_over_the_hand_is_registered_again_with_the_han
         assert_joints_within(&fit.skeleton, &s.truth, &right_arm, 0.015, "seed 10");
         let err = unswapped_joint_error(&fit.skeleton, &s.truth, "seed 10");
         assert!(err < 0.01, "seed 10: joint error {err}");
+    });
+}
+
+#[test]
+fn a_fit_with_an_arm_folded_up_on_itself_is_registered_again_with_the_arm() {
+    on_one_thread(|| {
+        // `synth --seed 15 --rigid --height 1.7` (30k points). Its fit had the right arm
+        // folded up on itself (upper arm, forearm and hand collapsed, the forearm at 0.08
+        // coverage) and the hand found lost on a complete statue: joint error 6.76%. The
+        // dangling-end check now takes a lost hand below a collapsed, uncovered forearm that
+        // the lost-limb rules keep: 1.31% and nothing lost.
+        let s = posed_human(15, 30_000);
+        let fit = register_as_the_cli(&s);
+        let lost = fit.missing_names();
+        assert!(
+            lost.is_empty(),
+            "seed 15: found lost on a complete statue: {lost:?}"
+        );
+        let err = unswapped_joint_error(&fit.skeleton, &s.truth, "seed 15");
+        assert!(err < 0.02, "seed 15: joint error {err}");
     });
 }
 

@@ -172,7 +172,8 @@
 //!    hand lost on a complete statue. Trigger: the last bone of a limb chain that the
 //!    lost-limb rules of level 6 ([`lost_limbs`], run here on the current fit) would take,
 //!    at full size (not shrunk: FAKIR shrinks the bones of a limb cut at the wrist onto the
-//!    stump), below a bone neither lost nor under `MISSING` coverage
+//!    stump), below a bone neither lost nor under `MISSING` coverage; or below a bone that
+//!    is not lost but collapsed and under `MISSING` coverage, an arm folded up on itself
 //!    ([`WorldSkeleton::most_dangling_end`]). Start: that bone and the last share its vector
 //!    in rest proportions ([`WorldSkeleton::split_end`]: the last bone ends where the bone
 //!    before it ended). Lower score wins. Of the 72 seeds only the four with a hand found

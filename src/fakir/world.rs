@@ -643,13 +643,19 @@ impl WorldSkeleton {
             })
     }
 
-    /// The chain whose **end dangles below a covered bone**: among the chains of at least
-    /// two free bones (none in `skip`), those whose last bone is judged `lost` without having
-    /// collapsed (`shrunk` false: FAKIR shrinks the bones of a lost limb onto the stump)
-    /// while the bone before it is neither lost nor under `missing` support coverage; the
-    /// least covered such last bone, or `None`. A fit that stretched a forearm over the hand
-    /// (see [`WorldSkeleton::split_end`]) leaves the hand, at full size, off the statue or
-    /// on points the forearm explains as well.
+    /// The chain whose **end dangles below a covered or a folded-up bone**: among the chains
+    /// of at least two free bones (none in `skip`), those whose last bone is judged `lost`
+    /// while the bone before it is not, and either
+    /// - the last bone has not collapsed (`shrunk` false: FAKIR shrinks the bones of a lost
+    ///   limb onto the stump) and the bone before it reaches `missing` support coverage: a
+    ///   fit that stretched a forearm over the hand (see [`WorldSkeleton::split_end`]) leaves
+    ///   the hand, at full size, off the statue or on points the forearm explains as well; or
+    /// - the bone before it has collapsed too and is under `missing` coverage, yet the
+    ///   lost-limb rules keep it for points that nothing else explains: an arm folded up on
+    ///   itself, its bones shrunk where the scan has a whole arm (a limb cut part-way is taken
+    ///   lost down from the cut, or keeps a covered stump);
+    ///
+    /// the least covered such last bone, or `None`.
     pub fn most_dangling_end(
         &self,
         skip: &[bool],
@@ -662,7 +668,10 @@ impl WorldSkeleton {
         for c in self.free_chains(skip, 2) {
             let n = c.len();
             let (p, last) = (c[n - 2], c[n - 1]);
-            if !lost[last] || shrunk[last] || lost[p] || coverage[p] < missing {
+            let covered = coverage[p] >= missing;
+            let stretched_over = !shrunk[last] && covered;
+            let folded_up = shrunk[p] && !covered;
+            if !lost[last] || lost[p] || !(stretched_over || folded_up) {
                 continue;
             }
             if best.is_none_or(|(_, v)| coverage[last] < v) {
