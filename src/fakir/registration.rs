@@ -178,8 +178,9 @@
 //!    in rest proportions ([`WorldSkeleton::split_end`]: the last bone ends where the bone
 //!    before it ended). Lower score wins. Of the 72 seeds only the four with a hand found
 //!    lost trigger it: 10 (1.77% → 0.66%), 33 (2.30% → 0.75%) and 55 (1.37% → 1.53%, its
-//!    arm now right to 0.8% but its head refitted worse) lose their false loss; 15 (whole
-//!    arm off, forearm uncovered too) does not trigger. On 8 statues cut through a hand, a
+//!    arm now right to 0.8% but its head refitted worse) lose their false loss; 15 (its arm
+//!    folded up: upper arm, forearm and hand collapsed, the forearm uncovered) triggers
+//!    through the folded-up case: 6.76% → 1.31%, nothing lost. On 8 statues cut through a hand, a
 //!    forearm or a foot (seeds 101–108) it fired once (a foot cut at the ankle), and the
 //!    foot was still found lost.
 //! 6. **Lost limbs** (our choice; option `missing`): the papers note that FAKIR "cannot
