@@ -180,9 +180,9 @@
 //!    lost trigger it: 10 (1.77% → 0.66%), 33 (2.30% → 0.75%) and 55 (1.37% → 1.53%, its
 //!    arm now right to 0.8% but its head refitted worse) lose their false loss; 15 (its arm
 //!    folded up: upper arm, forearm and hand collapsed, the forearm uncovered) triggers
-//!    through the folded-up case: 6.76% → 1.31%, nothing lost. On 8 statues cut through a hand, a
-//!    forearm or a foot (seeds 101–108) it fired once (a foot cut at the ankle), and the
-//!    foot was still found lost.
+//!    through the folded-up case: 6.76% → 1.31%, nothing lost. On 8 statues cut through a
+//!    hand, a forearm or a foot (seeds 101–108) it fired once (a foot cut at the ankle), and
+//!    the foot was still found lost; the folded-up case fires on none of 14 (101–114).
 //! 6. **Lost limbs** (our choice; option `missing`): the papers note that FAKIR "cannot
 //!    predict the right length or angle" of a bone whose data is missing (thesis §2.5.1);
 //!    in practice the bones of a cut limb fold back onto the stump or wander onto other

@@ -650,7 +650,7 @@ impl WorldSkeleton {
     ///   limb onto the stump) and the bone before it reaches `missing` support coverage: a
     ///   fit that stretched a forearm over the hand (see [`WorldSkeleton::split_end`]) leaves
     ///   the hand, at full size, off the statue or on points the forearm explains as well; or
-    /// - the bone before it has collapsed too and is under `missing` coverage, yet the
+    /// - the bone before it has collapsed (`shrunk`) and is under `missing` coverage, yet the
     ///   lost-limb rules keep it for points that nothing else explains: an arm folded up on
     ///   itself, its bones shrunk where the scan has a whole arm (a limb cut part-way is taken
     ///   lost down from the cut, or keeps a covered stump);
