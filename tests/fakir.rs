@@ -2338,6 +2338,19 @@ fn a_fit_with_an_arm_run_backwards_is_registered_again_turned_around() {
     });
 }
 
+/// Registers the complete statue `synth --seed SEED --rigid --height 1.7` (30k points) as
+/// the CLI does and asserts that nothing was found lost on it.
+fn register_complete_seed(seed: u64) -> (SynthStatue, pygmalion::fakir::Fit) {
+    let s = posed_human(seed, 30_000);
+    let fit = register_as_the_cli(&s);
+    let lost = fit.missing_names();
+    assert!(
+        lost.is_empty(),
+        "seed {seed}: found lost on a complete statue: {lost:?}"
+    );
+    (s, fit)
+}
+
 #[test]
 fn a_fit_with_a_forearm_stretched_over_the_hand_is_registered_again_with_the_hand() {
     on_one_thread(|| {
@@ -2345,13 +2358,7 @@ fn a_fit_with_a_forearm_stretched_over_the_hand_is_registered_again_with_the_han
         // the right forearm reached the tip of the hand (the wrist 15 cm off) and the hand
         // hung beside it, found lost on a complete statue: joint error 1.77%. With the
         // forearm's vector shared by forearm and hand, 0.66% and nothing lost.
-        let s = posed_human(10, 30_000);
-        let fit = register_as_the_cli(&s);
-        let lost = fit.missing_names();
-        assert!(
-            lost.is_empty(),
-            "seed 10: found lost on a complete statue: {lost:?}"
-        );
+        let (s, fit) = register_complete_seed(10);
         let right_arm = ["r_elbow", "r_wrist", "r_hand_tip"];
         assert_joints_within(&fit.skeleton, &s.truth, &right_arm, 0.015, "seed 10");
         let err = unswapped_joint_error(&fit.skeleton, &s.truth, "seed 10");
@@ -2367,13 +2374,7 @@ fn a_fit_with_an_arm_folded_up_on_itself_is_registered_again_with_the_arm() {
         // coverage) and the hand found lost on a complete statue: joint error 6.76%. The
         // dangling-end check now takes a lost hand below a collapsed, uncovered forearm that
         // the lost-limb rules keep: 1.31% and nothing lost.
-        let s = posed_human(15, 30_000);
-        let fit = register_as_the_cli(&s);
-        let lost = fit.missing_names();
-        assert!(
-            lost.is_empty(),
-            "seed 15: found lost on a complete statue: {lost:?}"
-        );
+        let (s, fit) = register_complete_seed(15);
         let err = unswapped_joint_error(&fit.skeleton, &s.truth, "seed 15");
         assert!(err < 0.02, "seed 15: joint error {err}");
     });
