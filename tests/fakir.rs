@@ -1261,6 +1261,26 @@ fn starved_limbs_registration() {
     }
 }
 
+#[test]
+fn a_leg_cut_through_the_thigh_does_not_take_the_other_leg() {
+    on_one_thread(|| {
+        // The crossed-over-limb check: seed 62 cut through the left thigh at 0.3 (30k points,
+        // as the CLI runs it). Without the check the left leg ran from its hip over to the
+        // right knee and down the right leg, the right shin and foot kept 88 points and none,
+        // nothing was found lost, and the joints but the left ankle and toe were 4.36% of the
+        // height off (the left knee, gone with the cut, counted); with the legs exchanged
+        // below the thighs: 1.71%, the left shin and foot lost.
+        check_lost_case(
+            62,
+            ("l_thigh", 0.3),
+            &["l_shin", "l_foot"],
+            &[],
+            30_000,
+            register_as_the_cli,
+        )
+    });
+}
+
 /// A lost-limb case: seed, bone cut, where along it, bones that must be lost, bones that may be.
 type LostCase<'a> = (u64, &'a str, f32, &'a [&'a str], &'a [&'a str]);
 
@@ -1748,6 +1768,69 @@ fn crossed_limbs_are_found_and_exchanging_below_them_uncrosses_them() {
                 assert!((*p - *q).length() < 1e-4, "seed {seed}, {name}: joint {j}");
             }
         }
+    }
+}
+
+#[test]
+fn a_starved_limb_whose_mirror_reached_over_to_its_place_is_found() {
+    use pygmalion::fakir::registration::{CROSSED_OVER_NEAR, STARVED};
+    use pygmalion::fakir::support::mirrors;
+    for seed in [3u64, 8, 16, 21] {
+        let s = posed_human(seed, 2_000);
+        let t = s.truth.template.clone();
+        let mirror = mirrors(&t);
+        let none = vec![false; t.bones.len()];
+        let bone = |n: &str| t.bone_index(n).unwrap();
+        let (lt, ls) = (bone("l_thigh"), bone("l_shin"));
+        let (rt, rs, rf) = (bone("r_thigh"), bone("r_shin"), bone("r_foot"));
+        let truth = WorldSkeleton::from_skeleton(&s.truth);
+        let posed = truth.pose();
+        // The left thigh laid from its hip over to the right knee, as on a statue cut
+        // through the left thigh: the left leg takes the right leg's points and the right
+        // shin and foot keep almost none.
+        let mut w = truth.clone();
+        w.aim(lt, posed.bones[lt].c1, posed.bones[rt].c2);
+        let mut points = vec![500usize; t.bones.len()];
+        (points[rs], points[rf]) = (20, 0);
+        let found = |w: &WorldSkeleton, points: &[usize], skip: &[bool]| {
+            w.most_crossed_over(&mirror, skip, points, STARVED, CROSSED_OVER_NEAR)
+        };
+        // The limbs below the right thigh (its parent) are the ones to exchange.
+        assert_eq!(found(&w, &points, &none), Some(rt), "seed {seed}");
+        // Not starved: 30% of the mirror's points (the bound is a quarter).
+        let mut fed = points.clone();
+        (fed[rs], fed[rf]) = (300, 0);
+        assert_eq!(found(&w, &fed, &none), None, "seed {seed}");
+        // Starved, but the left thigh where it belongs (the true knees are further apart
+        // than half a thigh on these statues): a limb cut short, not a crossed-over one.
+        let apart = (posed.bones[lt].c2 - posed.bones[rt].c2).length();
+        let shorter = truth.lengths[lt].min(truth.lengths[rt]);
+        assert!(
+            apart >= CROSSED_OVER_NEAR * shorter,
+            "seed {seed}: knees close"
+        );
+        assert_eq!(found(&truth, &points, &none), None, "seed {seed}");
+        // A bone of the four in `skip` (known lost) leaves the pair out.
+        for k in [rs, rt, ls, lt] {
+            let mut skip = none.clone();
+            skip[k] = true;
+            assert_eq!(found(&w, &points, &skip), None, "seed {seed}, {k}");
+        }
+        // Of two pairs, the one nearest the root: the legs' shins end together too and the
+        // foot is the more starved, but the exchange below the thighs moves both.
+        let mut w2 = w.clone();
+        w2.aim(ls, w.pose().bones[ls].c1, posed.bones[rs].c2);
+        assert_eq!(found(&w2, &points, &none), Some(rt), "seed {seed}");
+        // An arm crossed over: the right hand starved (a fifth of the left one's points), the
+        // left forearm reaching the right wrist; the legs fed. With the legs starved as above
+        // too, the thighs win: they hang nearer the root than the forearms.
+        let (lfa, rfa, rh) = (bone("l_forearm"), bone("r_forearm"), bone("r_hand"));
+        w.aim(lfa, posed.bones[lfa].c1, posed.bones[rfa].c2);
+        let mut arm = vec![500usize; t.bones.len()];
+        arm[rh] = 100;
+        assert_eq!(found(&w, &arm, &none), Some(rfa), "seed {seed}");
+        (arm[rs], arm[rf]) = (20, 0);
+        assert_eq!(found(&w, &arm, &none), Some(rt), "seed {seed}");
     }
 }
 

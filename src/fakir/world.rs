@@ -301,6 +301,61 @@ impl WorldSkeleton {
         best.map(|(a, _)| a)
     }
 
+    /// The limb that has **crossed over** onto its mirror's place, as the bone to exchange
+    /// below ([`WorldSkeleton::exchanged_below`]), or `None`. A limb bone `b` (free, with a
+    /// free parent `p`, none of the four bones below in `skip`) whose subtree holds fewer than
+    /// `starved` times the points of its mirror `m`'s subtree (`points`: each bone's point
+    /// count), while `p` and its mirror `p'` end within `near` times the shorter of the two
+    /// lengths of each other: `p'` has reached over to `p`'s end and `m`'s subtree lies where
+    /// `b`'s should, on `b`'s points. On a statue cut through the left thigh, FAKIR can lay the
+    /// left leg from its hip over to the right knee and down the right leg, and leave the right
+    /// leg's shin and foot folded at that knee with almost no points; the lost-limb rules then
+    /// take nothing, or the right leg. Of several such pairs the one nearest the root wins
+    /// (the fewest bones above `p`: exchanging below it moves the others too), then the most
+    /// starved `b` (the lowest ratio of the two subtrees' points).
+    pub fn most_crossed_over(
+        &self,
+        mirror: &[Option<usize>],
+        skip: &[bool],
+        points: &[usize],
+        starved: f64,
+        near: f32,
+    ) -> Option<usize> {
+        let t = &self.template;
+        let posed = self.pose();
+        let count = |b: usize| t.subtree(b).iter().map(|&i| points[i]).sum::<usize>() as f64;
+        let free = |b: usize| t.bones[b].kind == BoneKind::Free && !skip[b];
+        let depth = |mut b: usize| {
+            let mut d = 0;
+            while let Some(p) = t.bones[b].parent {
+                (b, d) = (p, d + 1);
+            }
+            d
+        };
+        let mut best: Option<(usize, usize, f64)> = None;
+        for b in 0..t.bones.len() {
+            let (Some(p), Some(m)) = (t.bones[b].parent, mirror[b]) else {
+                continue;
+            };
+            let Some(q) = mirror[p] else { continue };
+            if q == p || ![b, p, m, q].into_iter().all(free) {
+                continue;
+            }
+            let ratio = count(b) / count(m).max(1.0);
+            let shorter = self.lengths[p].min(self.lengths[q]);
+            let apart = (posed.bones[p].c2 - posed.bones[q].c2).length();
+            let key = (depth(p), ratio);
+            if ratio < starved
+                && shorter > 0.0
+                && apart < near * shorter
+                && best.is_none_or(|(_, d, r)| key < (d, r))
+            {
+                best = Some((p, key.0, ratio));
+            }
+        }
+        best.map(|(p, ..)| p)
+    }
+
     /// The skeleton with the limbs below the mirrored bones `a` and `mirror[a]` exchanged
     /// (the start that uncrosses a pair found by [`WorldSkeleton::most_crossed`]): each of the
     /// two bones keeps its first joint and reaches to the other's end (its end radius with
