@@ -302,12 +302,12 @@ impl WorldSkeleton {
     }
 
     /// The limb that has **crossed over** onto its mirror's place, as the bone to exchange
-    /// below ([`WorldSkeleton::exchanged_below`]), or `None`. A limb bone `b` (free, with a
-    /// free parent `p`, none of the four bones below in `skip`) whose subtree holds fewer than
-    /// `starved` times the points of its mirror `m`'s subtree (`points`: each bone's point
-    /// count), while `p` and its mirror `p'` end within `near` times the shorter of the two
-    /// lengths of each other: `p'` has reached over to `p`'s end and `m`'s subtree lies where
-    /// `b`'s should, on `b`'s points. On a statue cut through the left thigh, FAKIR can lay the
+    /// below ([`WorldSkeleton::exchanged_below`]), or `None`. A limb bone `b` with a parent
+    /// `p`, whose subtree holds fewer than `starved` times the points of its mirror `m`'s
+    /// subtree (`points`: each bone's point count), while `p` and its mirror `p'` end closer
+    /// together than `near` times the shorter of their two lengths: `p'` has reached over to
+    /// `p`'s end and `m`'s subtree lies where `b`'s should, on `b`'s points. The four bones
+    /// must be free and none of them in `skip` (the trunk, bones known lost). On a statue cut through the left thigh, FAKIR can lay the
     /// left leg from its hip over to the right knee and down the right leg, and leave the right
     /// leg's shin and foot folded at that knee with almost no points; the lost-limb rules then
     /// take nothing, or the right leg. Of several such pairs the one nearest the root wins
