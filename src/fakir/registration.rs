@@ -91,11 +91,13 @@
 //!    level 6 then takes nothing lost, or the healthy leg. Trigger
 //!    ([`WorldSkeleton::most_crossed_over`]): a limb bone whose subtree holds fewer than
 //!    [`STARVED`] times the points of its mirror's, below a bone that ends within
-//!    [`CROSSED_OVER_NEAR`] of the shorter length from its own mirror's end. Start: the limbs
+//!    [`CROSSED_OVER_NEAR`] of the longer length from its own mirror's end. Start: the limbs
 //!    below that pair exchanged ([`WorldSkeleton::exchanged_below`]); lower score wins.
 //!    Measured (30k points, CLI defaults): on 13 statues cut through a thigh it fired on
-//!    three: seed 62 cut at 0.3 3.54% → 0.94% (the joints the scan has), its left shin and
-//!    foot now found lost; seed 68 cut at 0.3 4.44% → 1.42%, no longer taking the healthy
+//!    four: seed 62 cut at 0.3 3.54% → 0.94% (the joints the scan has), its left shin and
+//!    foot now found lost; seed 72 2.48% → 0.12%, the cut leg found lost instead of the
+//!    healthy one (whose thigh the fit had collapsed: measured against the shorter length
+//!    the check missed it); seed 68 cut at 0.3 4.44% → 1.42%, no longer taking the healthy
 //!    leg lost; seed 73 13.88% → 7.87%, but with a healthy forearm and hand now lost. It
 //!    fired on none of the 72 complete statues nor on four arm and shin cuts.
 //!
@@ -1425,7 +1427,7 @@ fn preferred(fits: &[FullFit]) -> usize {
         .expect("at least one fit")
 }
 
-/// How near the ends of two mirrored limb bones must be, as a fraction of the shorter one's
+/// How near the ends of two mirrored limb bones must be, as a fraction of the longer one's
 /// length, for the crossed-over-limb check to examine the limbs below them
 /// ([`WorldSkeleton::most_crossed_over`]).
 pub const CROSSED_OVER_NEAR: f32 = 0.5;

@@ -305,7 +305,8 @@ impl WorldSkeleton {
     /// below ([`WorldSkeleton::exchanged_below`]), or `None`. A limb bone `b` with a parent
     /// `p`, whose subtree holds fewer than `starved` times the points of its mirror `m`'s
     /// subtree (`points`: each bone's point count), while `p` and its mirror `p'` end closer
-    /// together than `near` times the shorter of their two lengths: `p'` has reached over to
+    /// together than `near` times the longer of their two lengths (one of the two may have
+    /// collapsed): `p'` has reached over to
     /// `p`'s end and `m`'s subtree lies where `b`'s should, on `b`'s points. The four bones
     /// must be free and none of them in `skip` (the trunk, bones known lost). On a statue cut through the left thigh, FAKIR can lay the
     /// left leg from its hip over to the right knee and down the right leg, and leave the right
@@ -342,12 +343,12 @@ impl WorldSkeleton {
                 continue;
             }
             let ratio = count(b) / count(m).max(1.0);
-            let shorter = self.lengths[p].min(self.lengths[q]);
+            let longer = self.lengths[p].max(self.lengths[q]);
             let apart = (posed.bones[p].c2 - posed.bones[q].c2).length();
             let key = (depth(p), ratio);
             if ratio < starved
-                && shorter > 0.0
-                && apart < near * shorter
+                && longer > 0.0
+                && apart < near * longer
                 && best.is_none_or(|(_, d, r)| key < (d, r))
             {
                 best = Some((p, key.0, ratio));
