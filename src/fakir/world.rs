@@ -302,18 +302,20 @@ impl WorldSkeleton {
     }
 
     /// The limb that has **crossed over** onto its mirror's place, as the bone to exchange
-    /// below ([`WorldSkeleton::exchanged_below`]), or `None`. A limb bone `b` with a parent
-    /// `p`, whose subtree holds fewer than `starved` times the points of its mirror `m`'s
-    /// subtree (`points`: each bone's point count), while `p` and its mirror `p'` end closer
-    /// together than `near` times the longer of their two lengths (one of the two may have
-    /// collapsed): `p'` has reached over to
-    /// `p`'s end and `m`'s subtree lies where `b`'s should, on `b`'s points. The four bones
-    /// must be free and none of them in `skip` (the trunk, bones known lost). On a statue cut through the left thigh, FAKIR can lay the
-    /// left leg from its hip over to the right knee and down the right leg, and leave the right
-    /// leg's shin and foot folded at that knee with almost no points; the lost-limb rules then
-    /// take nothing, or the right leg. Of several such pairs the one nearest the root wins
-    /// (the fewest bones above `p`: exchanging below it moves the others too), then the most
-    /// starved `b` (the lowest ratio of the two subtrees' points).
+    /// below ([`WorldSkeleton::exchanged_below`]), or `None`.
+    ///
+    /// A limb bone `b` with a parent `p`, whose subtree holds fewer than `starved` times the
+    /// points of its mirror `m`'s subtree (`points`: each bone's point count), while `p` and
+    /// its mirror `p'` end closer together than `near` times the longer of their two lengths
+    /// (one of the two may have collapsed): `p'` has reached over to `p`'s end and `m`'s
+    /// subtree lies where `b`'s should, on `b`'s points. The four bones must be free and none
+    /// of them in `skip` (the trunk, bones known lost). On a statue cut through the left
+    /// thigh, FAKIR can lay the left leg from its hip over to the right knee and down the
+    /// right leg, and leave the right leg's shin and foot folded at that knee with almost no
+    /// points; the lost-limb rules then take nothing, or the right leg. Of several such pairs
+    /// the one nearest the root wins (the fewest bones above `p`: exchanging below it moves
+    /// the others too), then the most starved `b` (the lowest ratio of the two subtrees'
+    /// points).
     pub fn most_crossed_over(
         &self,
         mirror: &[Option<usize>],
