@@ -501,3 +501,34 @@ fn the_bounding_sphere_holds_every_surface_sample() {
         assert!(farthest >= 0.9 * radius, "{farthest} much inside {radius}");
     }
 }
+
+/// `PreparedBone::local` decides between the radial direction `w / y` and the fixed `perp`
+/// with a shortcut that skips `|d|` in the common case; it must decide exactly as the plain
+/// rule `y > 1e-12 (1 + |d|)` does, near the axis, far from the bone and at the shortcut's
+/// edges (`y` = 1e-4, `|d|` = 1e7).
+#[test]
+fn local_radial_direction_follows_the_plain_rule() {
+    let bone = Bone::new(Vec3::ZERO, 0.5, Vec3::new(0.0, 0.0, 2.0), 0.3);
+    let pb = bone.prepare();
+    let mut checked = 0;
+    for y in [
+        0.0f32, 1e-13, 1e-11, 1e-6, 9.99e-5, 1e-4, 1.01e-4, 0.5, 100.0,
+    ] {
+        for x in [0.0f32, 1.0, -3.0, 1e6, 9.9e6, 1e7, 1.2e7, 1e9, -1e10] {
+            let p = Vec3::new(y * 0.6, y * 0.8, x);
+            let (xl, yl, v) = pb.local(p);
+            let d = p - bone.c1;
+            let plain = if yl > 1e-12 * (1.0 + d.length()) {
+                (d - xl * pb.axis) / yl
+            } else {
+                pb.perp
+            };
+            assert_eq!(
+                v, plain,
+                "y {y}, x {x}: {v:?} against the plain rule's {plain:?}"
+            );
+            checked += 1;
+        }
+    }
+    assert_eq!(checked, 81);
+}

@@ -263,7 +263,9 @@ impl PreparedBone {
         let x = d.dot(self.axis);
         let w = d - x * self.axis;
         let y = w.length();
-        let v = if y > TINY * (1.0 + d.length()) {
+        // The first test settles the common case without `|d|` (a square root): with
+        // `|d|² < 10¹⁴`, `TINY (1 + |d|) < 10⁻⁵ < y`.
+        let v = if (y >= 1e-4 && d.length_squared() < 1e14) || y > TINY * (1.0 + d.length()) {
             w / y
         } else {
             self.perp
@@ -314,6 +316,7 @@ impl PreparedBone {
         }
     }
 
+    #[inline]
     fn sphere_projection(&self, which: u8, p: Vec3, n: Option<Vec3>) -> Projection {
         let b = &self.bone;
         let (c, r) = if which == 1 {
@@ -331,16 +334,6 @@ impl PreparedBone {
         };
         let part = if which == 1 { Part::Cap1 } else { Part::Cap2 };
         let tau = if which == 1 { 0.0 } else { 1.0 };
-        let near = Projection {
-            point: c + r * dir,
-            normal: dir,
-            distance: (le - r).abs(),
-            residual: le - r,
-            part,
-            tau,
-            flipped: false,
-            on_surface: self.on_cap(which, dir),
-        };
         match n {
             Some(n) if dir.dot(n) <= 0.0 => Projection {
                 point: c - r * dir,
@@ -352,7 +345,16 @@ impl PreparedBone {
                 flipped: true,
                 on_surface: self.on_cap(which, -dir),
             },
-            _ => near,
+            _ => Projection {
+                point: c + r * dir,
+                normal: dir,
+                distance: (le - r).abs(),
+                residual: le - r,
+                part,
+                tau,
+                flipped: false,
+                on_surface: self.on_cap(which, dir),
+            },
         }
     }
 
@@ -463,6 +465,7 @@ impl PreparedBone {
     /// The normal-constrained projection of `p` whose (approximate, unit) normal is `n`
     /// (thesis §2.2.1 and paper 001 appendix A; see the module docs for every case). A zero
     /// `n` gives the orthogonal projection.
+    #[inline]
     pub fn project_constrained(&self, p: Vec3, n: Vec3) -> Projection {
         if n == Vec3::ZERO {
             return self.project(p);
