@@ -264,7 +264,7 @@ impl PreparedBone {
         let w = d - x * self.axis;
         let y = w.length();
         // The first test settles the common case without `|d|` (a square root): with
-        // `|d|² < 10¹⁴`, `TINY (1 + |d|) < 10⁻⁵ < y`.
+        // `|d|² < 10¹⁴`, `TINY (1 + |d|)` is at most about 10⁻⁵, below `y ≥ 10⁻⁴`.
         let v = if (y >= 1e-4 && d.length_squared() < 1e14) || y > TINY * (1.0 + d.length()) {
             w / y
         } else {
