@@ -1281,6 +1281,26 @@ fn a_leg_cut_through_the_thigh_does_not_take_the_other_leg() {
     });
 }
 
+#[test]
+fn a_hand_cut_at_the_wrist_is_found_lost_though_the_forearm_made_room_for_it() {
+    on_one_thread(|| {
+        // Seed 98 without its right hand (cut at the wrist; 30k points, as the CLI runs it).
+        // FAKIR shortened the right forearm to 0.185 (truth 0.307) and laid the hand over its
+        // far half: removing the hand cost its points more than the redundancy bound, and
+        // nothing was found lost. Its support says missing (the left hand's does not), the
+        // two bones are shorter together than the left ones (0.27 against 0.46), and the
+        // forearm reaching to the hand's end explains its points: the hand is lost.
+        check_lost_case(
+            98,
+            ("r_hand", 0.0),
+            &["r_hand"],
+            &[],
+            30_000,
+            register_as_the_cli,
+        )
+    });
+}
+
 /// A lost-limb case: seed, bone cut, where along it, bones that must be lost, bones that may be.
 type LostCase<'a> = (u64, &'a str, f32, &'a [&'a str], &'a [&'a str]);
 

@@ -242,6 +242,17 @@ impl<'p> Solver<'p> {
     /// another part — the hand of a forearm cut at the wrist folded back onto the upper arm —
     /// costs almost nothing to remove; a real limb costs about its own thickness.
     pub fn removal_excess(&self, b: usize, lost: &[bool]) -> Option<f64> {
+        self.removal_excess_with(b, lost, None)
+    }
+
+    /// [`Solver::removal_excess`] with one other bone replaced (`(index, bone)`): what the
+    /// subtree's points would lose if it were gone and that bone were this one.
+    pub fn removal_excess_with(
+        &self,
+        b: usize,
+        lost: &[bool],
+        replaced: Option<(usize, Bone)>,
+    ) -> Option<f64> {
         let t = &self.world.template;
         let gone: Vec<usize> = t.subtree(b);
         let mut members: Vec<u32> = gone
@@ -256,7 +267,10 @@ impl<'p> Solver<'p> {
         let bones = self.world.bones();
         let others: Vec<PreparedBone> = (0..bones.len())
             .filter(|x| !gone.contains(x) && !lost[*x])
-            .map(|x| bones[x].prepare())
+            .map(|x| match replaced {
+                Some((q, bone)) if q == x => bone.prepare(),
+                _ => bones[x].prepare(),
+            })
             .collect();
         if others.is_empty() {
             return None;
