@@ -1332,36 +1332,53 @@ fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result
         } else {
             REDUNDANT
         };
-        // Laid over its parent's far part: a last bone without support (at its expected
-        // size) whose mirror has support, shorter with its parent than their mirrors, and
-        // whose points the parent explains as well once it reaches to that bone's end — the
-        // hand of a forearm cut at the wrist, the forearm shortened to make room.
-        let over_parent = support[b].missing
-            && mirror[b].is_some_and(|m| !support[m].missing)
-            && t.bones[b].children.is_empty()
-            && t.bones[b]
-                .parent
-                .filter(|&p| !trunk[p] && !lost[p] && t.bones[p].kind != BoneKind::Block)
-                .is_some_and(|p| {
-                    let all = s.world.bones();
-                    let (l, ml) = (&s.world.lengths, mirror[b].zip(mirror[p]));
-                    // Shorter than its mirror: a cut takes length away.
-                    let shorter = ml.is_some_and(|(mb, mp)| {
-                        l[p] + l[b] < OVER_PARENT_SHORTER * (l[mp] + l[mb])
-                    });
-                    let reach = Bone::new(all[p].c1, all[p].r1, all[b].c2, all[p].r2);
-                    shorter
-                        && s.removal_excess_with(b, &lost, Some((p, reach)))
-                            .is_some_and(|e| e < limit * radius)
-                });
         lost[b] = bare
-            || over_parent
+            || laid_over_parent(s, support, (&mirror, &trunk), &lost, b, limit * radius)
             || (!hangs_from_trunk
                 && s.removal_excess(b, &lost)
                     .is_some_and(|e| e < limit * radius));
         s.unit().map_err(cancelled)?;
     }
     Ok(lost)
+}
+
+/// The laid-over-parent rule of [`lost_limbs`]: last bone `b` without support (at its
+/// expected size) whose mirror has support, shorter with its parent than their mirrors (a cut
+/// takes length away), and whose points the parent explains within `bound` once it reaches
+/// to `b`'s end — the hand of a forearm cut at the wrist, the forearm shortened to make room.
+/// `mirror` and `trunk`: each bone's mirror and whether it is a trunk bone.
+fn laid_over_parent(
+    s: &Solver,
+    support: &[BoneSupport],
+    (mirror, trunk): (&[Option<usize>], &[bool]),
+    lost: &[bool],
+    b: usize,
+    bound: f64,
+) -> bool {
+    let t = &s.world.template;
+    let (Some(p), Some(mb)) = (t.bones[b].parent, mirror[b]) else {
+        return false;
+    };
+    let Some(mp) = mirror[p] else {
+        return false;
+    };
+    if !support[b].missing
+        || support[mb].missing
+        || !t.bones[b].children.is_empty()
+        || trunk[p]
+        || lost[p]
+        || t.bones[p].kind == BoneKind::Block
+    {
+        return false;
+    }
+    let l = &s.world.lengths;
+    if l[p] + l[b] >= OVER_PARENT_SHORTER * (l[mp] + l[mb]) {
+        return false;
+    }
+    let all = s.world.bones();
+    let reach = Bone::new(all[p].c1, all[p].r1, all[b].c2, all[p].r2);
+    s.removal_excess_with(b, lost, Some((p, reach)))
+        .is_some_and(|e| e < bound)
 }
 
 /// A last bone laid over its parent ([`lost_limbs`]) is only lost when the two together are
