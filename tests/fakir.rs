@@ -2306,6 +2306,135 @@ fn the_dangling_end_is_a_lost_last_bone_below_a_covered_or_folded_up_one() {
 }
 
 #[test]
+fn sliding_a_limb_back_puts_each_bone_one_place_up_its_chain() {
+    for seed in [3u64, 8, 16, 21] {
+        let s = posed_human(seed, 2_000);
+        let t = s.truth.template.clone();
+        let w = WorldSkeleton::from_skeleton(&s.truth);
+        let before = w.pose();
+        let j = |name: &str| t.joint_index(name).unwrap();
+        let b = |name: &str| t.bone_index(name).unwrap();
+        for (a, next, [root, split, third, tip]) in [
+            ("r_thigh", "r_shin", ["r_hip", "r_knee", "r_ankle", "r_toe"]),
+            (
+                "l_upper_arm",
+                "l_forearm",
+                ["l_shoulder", "l_elbow", "l_wrist", "l_hand_tip"],
+            ),
+        ] {
+            let after = w.slid_back(b(a)).pose();
+            let what = format!("seed {seed}: {a}");
+            // The first joint stays; the joint after it splits the bone's old vector in rest
+            // proportions; each later joint lands where the one before it was.
+            let (from, to) = (before.joints[j(root)], before.joints[j(split)]);
+            assert!((after.joints[j(root)] - from).length() < 1e-5, "{what}");
+            let share = w.rest_length(b(a)) / (w.rest_length(b(a)) + w.rest_length(b(next)));
+            let between = from + (to - from) * share;
+            assert!((after.joints[j(split)] - between).length() < 1e-4, "{what}");
+            assert!((after.joints[j(third)] - to).length() < 1e-4, "{what}");
+            assert!(
+                (after.joints[j(tip)] - before.joints[j(third)]).length() < 1e-4,
+                "{what}"
+            );
+            assert_only_these_moved(&t, &before, &after, &[split, third, tip], &what);
+        }
+        // From the bone before the last it is the dangling-end check's start; from the last
+        // bone nothing moves.
+        for (p, last) in [("r_forearm", "r_hand"), ("l_shin", "l_foot")] {
+            let (x, y) = (w.slid_back(b(p)).pose(), w.split_end(b(last)).pose());
+            for k in 0..t.joints.len() {
+                assert!(
+                    (x.joints[k] - y.joints[k]).length() < 1e-6,
+                    "seed {seed}: {p}"
+                );
+            }
+        }
+        let same = w.slid_back(b("l_hand")).pose();
+        assert_only_these_moved(&t, &before, &same, &[], &format!("seed {seed}: hand"));
+    }
+}
+
+#[test]
+fn an_overreaching_limb_is_one_too_long_for_its_mirror_above_a_lost_tail() {
+    use pygmalion::fakir::registration::OVERREACH;
+    use pygmalion::fakir::support::MISSING;
+    let s = posed_human(3, 2_000);
+    let t = s.truth.template.clone();
+    let mut w = WorldSkeleton::from_skeleton(&s.truth);
+    let nb = t.bones.len();
+    let b = |name: &str| t.bone_index(name).unwrap();
+    // Mirrored limbs of equal lengths, then the right thigh stretched over the shin (a
+    // shin's length and a half longer: the shin on the foot, the foot off the statue).
+    for (l, r) in [
+        ("l_thigh", "r_thigh"),
+        ("l_shin", "r_shin"),
+        ("l_foot", "r_foot"),
+    ] {
+        w.lengths[b(r)] = w.lengths[b(l)];
+    }
+    let (none, full) = (vec![false; nb], vec![1.0f32; nb]);
+    let mark = |names: &[&str]| {
+        let mut v = vec![false; nb];
+        for n in names {
+            v[b(n)] = true;
+        }
+        v
+    };
+    let lost = mark(&["r_foot"]);
+    // Lengths equal to the mirror's: a foot taken lost is not a limb overreaching.
+    assert_eq!(
+        w.most_overreaching(&none, &lost, &full, MISSING, OVERREACH),
+        None
+    );
+    let foot = w.lengths[b("l_foot")];
+    w.lengths[b("r_thigh")] += 0.5 * foot;
+    // Nothing lost: nothing to explain.
+    assert_eq!(
+        w.most_overreaching(&none, &none, &full, MISSING, OVERREACH),
+        None
+    );
+    // The foot lost below a thigh half a foot too long: the thigh is the bone to slide
+    // back from, and a shin grown longer still would be.
+    assert_eq!(
+        w.most_overreaching(&none, &lost, &full, MISSING, OVERREACH),
+        Some(b("r_thigh"))
+    );
+    let mut longer = w.clone();
+    longer.lengths[b("r_shin")] *= 1.8;
+    assert_eq!(
+        longer.most_overreaching(&none, &lost, &full, MISSING, OVERREACH),
+        Some(b("r_shin"))
+    );
+    // A lost tail of two bones is examined from the bone above it.
+    let shin_and_foot = mark(&["r_shin", "r_foot"]);
+    let mut tail = w.clone();
+    tail.lengths[b("r_thigh")] = w.lengths[b("l_thigh")] + w.lengths[b("l_shin")];
+    assert_eq!(
+        tail.most_overreaching(&none, &shin_and_foot, &full, MISSING, OVERREACH),
+        Some(b("r_thigh"))
+    );
+    // Not below a share of the mirror's first lost bone; not when the mirror's foot is lost
+    // too (nothing to compare with), nor when the bone above the tail is uncovered (a limb
+    // cut there), nor in a skipped chain.
+    assert_eq!(w.most_overreaching(&none, &lost, &full, MISSING, 0.6), None);
+    let both = mark(&["r_foot", "l_foot"]);
+    assert_eq!(
+        w.most_overreaching(&none, &both, &full, MISSING, OVERREACH),
+        None
+    );
+    let mut bare = full.clone();
+    bare[b("r_shin")] = 0.1;
+    assert_eq!(
+        w.most_overreaching(&none, &lost, &bare, MISSING, OVERREACH),
+        None
+    );
+    assert_eq!(
+        w.most_overreaching(&mark(&["r_thigh"]), &lost, &full, MISSING, OVERREACH),
+        None
+    );
+}
+
+#[test]
 fn the_most_stretched_end_is_the_chain_whose_last_bone_outgrew_the_one_before() {
     use pygmalion::fakir::registration::STRETCHED_END;
     for seed in [3u64, 8, 16, 21] {
@@ -2539,6 +2668,7 @@ fn the_arm_checks_starts_and_detectors_hold_on_every_template() {
                 w.reversed_below(b),
                 w.slid_down(b),
                 w.split_end(b),
+                w.slid_back(b),
             ] {
                 let p = s.pose();
                 assert!(p.joints.iter().all(|j| j.is_finite()), "{name}: bone {b}");

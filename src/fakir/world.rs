@@ -584,6 +584,35 @@ impl WorldSkeleton {
         out
     }
 
+    /// The chain from free bone `a` **slid back** one bone (the start of the
+    /// overreaching-limb check): `a` and the bone after it share `a`'s vector in the
+    /// template's rest proportions, each later bone takes the vector (direction and length)
+    /// of the bone before it, and the last bone's vector is dropped; each frame swung
+    /// minimally onto its new direction; radii and everything else unchanged. A clone when
+    /// `a` is the last bone of its chain (or in none). From the bone before the last it is
+    /// [`WorldSkeleton::split_end`] of the last. A fit that stretched a thigh over the shin
+    /// has the shin on the foot and the foot off the statue; this start puts each bone back
+    /// one place up the limb.
+    pub fn slid_back(&self, a: usize) -> WorldSkeleton {
+        let mut out = self.clone();
+        let line = self.chain_from(a);
+        if line.len() < 2 {
+            return out;
+        }
+        let old: Vec<(Vec3, f32)> = line
+            .iter()
+            .map(|&b| (self.frames[b] * Vec3::X, self.lengths[b]))
+            .collect();
+        if !out.split_along(line[0], line[1], old[0].0, old[0].1) {
+            return out;
+        }
+        for i in 2..line.len() {
+            out.swing_onto(line[i], old[i - 1].0, old[i - 1].1);
+        }
+        out.enforce();
+        out
+    }
+
     /// The chain below free bone `a` **reversed** (the start of the hanging-limb check):
     /// `a` reaches from its first joint to where the chain's tip was, and the bones below
     /// it are laid back along the fit's own path from that tip to `a`'s old end, in the
@@ -734,6 +763,66 @@ impl WorldSkeleton {
             }
             if best.is_none_or(|(_, v)| coverage[last] < v) {
                 best = Some((last, coverage[last]));
+            }
+        }
+        best.map(|(b, _)| b)
+    }
+
+    /// The bone from which a limb **overreaches**: among the chains of at least two free
+    /// bones (none in `skip`) that end in a run of bones judged `lost` (the *tail*) below a
+    /// bone neither lost nor under `missing` coverage, whose mirror chain has none of the
+    /// tail's mirrors lost, those whose bones above the tail are longer together than their
+    /// mirrors by at least `share` of the length of the tail's first bone's mirror. The limb
+    /// has a bone's worth of length too much above where it seems to end: a thigh stretched
+    /// over the shin, the shin laid on the foot, the foot pushed off the statue and taken
+    /// lost. Of the chain with the largest excess (in those mirror lengths), the bone above
+    /// the tail longest relative to its mirror, or `None`.
+    pub fn most_overreaching(
+        &self,
+        skip: &[bool],
+        lost: &[bool],
+        coverage: &[f32],
+        missing: f32,
+        share: f32,
+    ) -> Option<usize> {
+        let t = &self.template;
+        let mut best: Option<(usize, f32)> = None;
+        for chain in &t.chains {
+            let c = chain.bones.as_slice();
+            let free = |b: &usize| !skip[*b] && t.bones[*b].kind == BoneKind::Free;
+            if c.len() < 2 || !c.iter().all(free) {
+                continue;
+            }
+            // The tail: the chain's lost bones from the last one up.
+            let tail = c.len() - c.iter().rev().take_while(|&&b| lost[b]).count();
+            if tail == 0 || tail == c.len() || coverage[c[tail - 1]] < missing {
+                continue;
+            }
+            let Some(m) = chain.mirror.map(|mc| t.chains[mc].bones.as_slice()) else {
+                continue;
+            };
+            if m.len() != c.len() {
+                continue;
+            }
+            if m[tail..].iter().any(|&x| lost[x]) {
+                continue;
+            }
+            let above: f32 = c[..tail].iter().map(|&b| self.lengths[b]).sum();
+            let mirrored: f32 = m[..tail].iter().map(|&b| self.lengths[b]).sum();
+            let unit = self.lengths[m[tail]];
+            if !(unit > 0.0) {
+                continue;
+            }
+            let excess = (above - mirrored) / unit;
+            if excess < share || best.is_some_and(|(_, e)| e >= excess) {
+                continue;
+            }
+            let longest = (0..tail).max_by(|&i, &j| {
+                let r = |k: usize| self.lengths[c[k]] / self.lengths[m[k]].max(f32::MIN_POSITIVE);
+                r(i).total_cmp(&r(j))
+            });
+            if let Some(k) = longest {
+                best = Some((c[k], excess));
             }
         }
         best.map(|(b, _)| b)
