@@ -2363,8 +2363,8 @@ fn an_overreaching_limb_is_one_too_long_for_its_mirror_above_a_lost_tail() {
     let mut w = WorldSkeleton::from_skeleton(&s.truth);
     let nb = t.bones.len();
     let b = |name: &str| t.bone_index(name).unwrap();
-    // Mirrored limbs of equal lengths, then the right thigh stretched over the shin (a
-    // shin's length and a half longer: the shin on the foot, the foot off the statue).
+    // Mirrored limbs of equal lengths, then the right thigh stretched towards the shin (half
+    // a foot longer than its mirror: the shin pushed down, the foot off the statue).
     for (l, r) in [
         ("l_thigh", "r_thigh"),
         ("l_shin", "r_shin"),
@@ -2405,12 +2405,15 @@ fn an_overreaching_limb_is_one_too_long_for_its_mirror_above_a_lost_tail() {
         longer.most_overreaching(&none, &lost, &full, MISSING, OVERREACH),
         Some(b("r_shin"))
     );
-    // A lost tail of two bones is examined from the bone above it.
+    // A lost tail of two bones is examined from the bone above it: the uncovered lost shin
+    // is part of the tail, and the covered thigh above it the bone to slide back from.
     let shin_and_foot = mark(&["r_shin", "r_foot"]);
     let mut tail = w.clone();
     tail.lengths[b("r_thigh")] = w.lengths[b("l_thigh")] + w.lengths[b("l_shin")];
+    let mut bare_shin = full.clone();
+    bare_shin[b("r_shin")] = 0.1;
     assert_eq!(
-        tail.most_overreaching(&none, &shin_and_foot, &full, MISSING, OVERREACH),
+        tail.most_overreaching(&none, &shin_and_foot, &bare_shin, MISSING, OVERREACH),
         Some(b("r_thigh"))
     );
     // Not below a share of the mirror's first lost bone; not when the mirror's foot is lost
@@ -2628,6 +2631,7 @@ fn a_fit_with_an_arm_folded_up_on_itself_is_registered_again_with_the_arm() {
 #[test]
 fn the_arm_checks_starts_and_detectors_hold_on_every_template() {
     use pygmalion::anatomy::Template;
+    use pygmalion::fakir::registration::OVERREACH;
     use pygmalion::fakir::support::MISSING;
     for name in ["human", "centaur", "quadruped", "mermaid"] {
         let t = std::sync::Arc::new(Template::builtin(name).unwrap());
@@ -2660,6 +2664,16 @@ fn the_arm_checks_starts_and_detectors_hold_on_every_template() {
                 let c = t.bones[b].chain.expect("a dangling end is in a chain");
                 assert_eq!(t.chains[c.0].bones.last(), Some(&b), "{name}");
             }
+        }
+        // At rest (mirrors of equal lengths) no limb overreaches, whichever bone is lost.
+        for b in 0..nb {
+            let mut lost = none.clone();
+            lost[b] = true;
+            assert_eq!(
+                w.most_overreaching(&none, &lost, &full, MISSING, OVERREACH),
+                None,
+                "{name}: bone {b}"
+            );
         }
         // Every start from every bone keeps a finite skeleton with the same bones.
         for b in 0..nb {

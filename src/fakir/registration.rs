@@ -212,14 +212,20 @@
 //!    chain slid back one bone from the bone above the tail longest relative to its mirror
 //!    ([`WorldSkeleton::slid_back`]: it and the next share its vector in rest proportions,
 //!    each later bone takes the vector of the one before). Lower score wins. It runs only
-//!    where level 6 would take a limb lost, so it changes none of the 72 complete statues'
-//!    fits (none has a limb taken lost). To see it at work the fits were perturbed: with
+//!    where the lost-limb rules would take a limb lost, so it changes none of the 72
+//!    complete statues' fits (none has a limb taken lost). Where the dangling-end check
+//!    fires first (an end left at full size below a covered bone) that check's start is
+//!    taken, so this one mostly sees ends FAKIR has shrunk. To see it at work the fits were perturbed: with
 //!    an LM loop stopped early (a trial change tried and not kept, see the README), 7
 //!    complete statues out of 128 fits had an end taken lost; on those it fired on three and
 //!    won on two (seed 24: a forearm stretched over the hand, 1.45% → 0.39%, nothing lost;
 //!    seed 36: an upper arm stretched over the forearm, forearm and hand lost, 2.66% →
 //!    0.54%, nothing lost) and lost on the third (a thigh over the shin). On the 10
-//!    statues cut below the knee or elbow (seeds 90–99) it fires on none.
+//!    statues cut below the knee or elbow (seeds 90–99) it fires on none, on 2 of 17 cut
+//!    through a thigh, an upper arm, a shin or a forearm (seeds 43, 62, 68, 70–81; one kept
+//!    the old fit, 0.40% → 0.43% on the other).
+//!    Of five real scans it fired on *Maria* only: its right clavicle had stretched to 0.82
+//!    against 0.15 for the left, and is 0.22 now.
 //! 6. **Lost limbs** (our choice; option `missing`): the papers note that FAKIR "cannot
 //!    predict the right length or angle" of a bone whose data is missing (thesis §2.5.1);
 //!    in practice the bones of a cut limb fold back onto the stump or wander onto other
@@ -1527,7 +1533,7 @@ fn preferred(fits: &[FullFit]) -> usize {
 /// slide the limb back ([`WorldSkeleton::most_overreaching`]). Only a trigger, loose on
 /// purpose (the generator jitters each side's lengths by up to ±30% on its own, so mirrors
 /// differ by more than this on healthy limbs): the lower score decides. It runs only where
-/// level 6 would take a limb lost.
+/// the lost-limb rules would take a limb lost.
 pub const OVERREACH: f32 = 0.25;
 
 /// How near the ends of two mirrored limb bones must be, as a fraction of the longer one's

@@ -592,7 +592,9 @@ impl WorldSkeleton {
     /// `a` is the last bone of its chain (or in none). From the bone before the last it is
     /// [`WorldSkeleton::split_end`] of the last. A fit that stretched a thigh over the shin
     /// has the shin on the foot and the foot off the statue; this start puts each bone back
-    /// one place up the limb.
+    /// one place up the limb. The bones below take their vectors as the fit left them, those
+    /// of bones taken lost (shrunk or folded) included: the registration from this start
+    /// finds their sizes again.
     pub fn slid_back(&self, a: usize) -> WorldSkeleton {
         let mut out = self.clone();
         let line = self.chain_from(a);
@@ -801,6 +803,7 @@ impl WorldSkeleton {
             let Some(m) = chain.mirror.map(|mc| t.chains[mc].bones.as_slice()) else {
                 continue;
             };
+            // (Template loading rejects mirror chains of another length.)
             if m.len() != c.len() {
                 continue;
             }
@@ -814,7 +817,7 @@ impl WorldSkeleton {
                 continue;
             }
             let excess = (above - mirrored) / unit;
-            if excess < share || best.is_some_and(|(_, e)| e >= excess) {
+            if !(excess >= share) || !best.is_none_or(|(_, e)| excess > e) {
                 continue;
             }
             let longest = (0..tail).max_by(|&i, &j| {
