@@ -12,7 +12,7 @@
 //! keep their rest frame relative to their leader and `ratio × leader length`; radii shared
 //! along chains stay equal ([`RadiusClasses`]).
 
-use crate::anatomy::template::{BoneKind, Template};
+use crate::anatomy::template::{BoneKind, ChainDef, Template};
 use crate::anatomy::{Posed, Skeleton};
 use crate::geometry::Bone;
 use crate::math::{Quat, Vec3};
@@ -699,7 +699,7 @@ impl WorldSkeleton {
     /// [`WorldSkeleton::slid_out`]) has a hand as long as a forearm and a hand together.
     pub fn most_stretched_end(&self, skip: &[bool], limit: f32) -> Option<usize> {
         let mut best: Option<(usize, f32)> = None;
-        for c in self.free_chains(skip, 3) {
+        for c in self.free_chains(skip, 3).map(|c| c.bones.as_slice()) {
             let n = c.len();
             let (p, last) = (c[n - 2], c[n - 1]);
             let rest = self.rest_lengths[last] / self.rest_lengths[p].max(1e-12);
@@ -715,21 +715,19 @@ impl WorldSkeleton {
     }
 
     /// The template's chains of at least `min` bones, all free and none in `skip` (the limb
-    /// chains the end checks examine), as their bones.
+    /// chains the end checks examine).
     fn free_chains<'a>(
         &'a self,
         skip: &'a [bool],
         min: usize,
-    ) -> impl Iterator<Item = &'a [usize]> + 'a {
+    ) -> impl Iterator<Item = &'a ChainDef> + 'a {
         let t = &self.template;
-        t.chains
-            .iter()
-            .map(|c| c.bones.as_slice())
-            .filter(move |c| {
-                c.len() >= min
-                    && c.iter()
-                        .all(|&b| !skip[b] && t.bones[b].kind == BoneKind::Free)
-            })
+        t.chains.iter().filter(move |c| {
+            c.bones.len() >= min
+                && c.bones
+                    .iter()
+                    .all(|&b| !skip[b] && t.bones[b].kind == BoneKind::Free)
+        })
     }
 
     /// The chain whose **end dangles below a covered or a folded-up bone**: among the chains
@@ -754,7 +752,7 @@ impl WorldSkeleton {
         missing: f32,
     ) -> Option<usize> {
         let mut best: Option<(usize, f32)> = None;
-        for c in self.free_chains(skip, 2) {
+        for c in self.free_chains(skip, 2).map(|c| c.bones.as_slice()) {
             let n = c.len();
             let (p, last) = (c[n - 2], c[n - 1]);
             let covered = coverage[p] >= missing;
@@ -789,12 +787,8 @@ impl WorldSkeleton {
     ) -> Option<usize> {
         let t = &self.template;
         let mut best: Option<(usize, f32)> = None;
-        for chain in &t.chains {
+        for chain in self.free_chains(skip, 2) {
             let c = chain.bones.as_slice();
-            let free = |b: &usize| !skip[*b] && t.bones[*b].kind == BoneKind::Free;
-            if c.len() < 2 || !c.iter().all(free) {
-                continue;
-            }
             // The tail: the chain's lost bones from the last one up.
             let tail = c.len() - c.iter().rev().take_while(|&&b| lost[b]).count();
             if tail == 0 || tail == c.len() || coverage[c[tail - 1]] < missing {
