@@ -2221,6 +2221,15 @@ fn splitting_a_limb_end_lays_the_last_two_bones_along_the_one_before() {
     }
 }
 
+/// One flag per bone of `t`, set for the bones named.
+fn marked(t: &pygmalion::anatomy::Template, names: &[&str]) -> Vec<bool> {
+    let mut v = vec![false; t.bones.len()];
+    for n in names {
+        v[t.bone_index(n).unwrap()] = true;
+    }
+    v
+}
+
 #[test]
 fn the_dangling_end_is_a_lost_last_bone_below_a_covered_or_folded_up_one() {
     use pygmalion::fakir::support::MISSING;
@@ -2231,13 +2240,7 @@ fn the_dangling_end_is_a_lost_last_bone_below_a_covered_or_folded_up_one() {
     let b = |name: &str| t.bone_index(name).unwrap();
     let none = vec![false; nb];
     let full = vec![1.0f32; nb];
-    let mark = |names: &[&str]| {
-        let mut v = vec![false; nb];
-        for n in names {
-            v[b(n)] = true;
-        }
-        v
-    };
+    let mark = |names: &[&str]| marked(&t, names);
     // Nothing lost: nothing dangles.
     assert_eq!(
         w.most_dangling_end(&none, &none, &full, &none, MISSING),
@@ -2373,13 +2376,7 @@ fn an_overreaching_limb_is_one_too_long_for_its_mirror_above_a_lost_tail() {
         w.lengths[b(r)] = w.lengths[b(l)];
     }
     let (none, full) = (vec![false; nb], vec![1.0f32; nb]);
-    let mark = |names: &[&str]| {
-        let mut v = vec![false; nb];
-        for n in names {
-            v[b(n)] = true;
-        }
-        v
-    };
+    let mark = |names: &[&str]| marked(&t, names);
     let lost = mark(&["r_foot"]);
     // Lengths equal to the mirror's: a foot taken lost is not a limb overreaching.
     assert_eq!(

@@ -215,10 +215,10 @@
 //!    where the lost-limb rules would take a limb lost, so it changes none of the 72
 //!    complete statues' fits (none has a limb taken lost). Where the dangling-end check
 //!    fires first (an end left at full size below a covered bone) that check's start is
-//!    taken, so this one mostly sees ends FAKIR has shrunk. To see it at work the fits were perturbed: with
-//!    an LM loop stopped early (a trial change tried and not kept, see the README), 7
-//!    complete statues out of 128 fits had an end taken lost; on those it fired on three and
-//!    won on two (seed 24: a forearm stretched over the hand, 1.45% → 0.39%, nothing lost;
+//!    taken, so this one mostly sees ends FAKIR has shrunk. To see it at work the fits were
+//!    perturbed: with an LM loop stopped early (a trial change tried and not kept, see the
+//!    README), 7 complete statues out of 128 fits had an end taken lost; on those it fired
+//!    on three and won on two (seed 24: a forearm stretched over the hand, 1.45% → 0.39%, nothing lost;
 //!    seed 36: an upper arm stretched over the forearm, forearm and hand lost, 2.66% →
 //!    0.54%, nothing lost) and lost on the third (a thigh over the shin). On the 10
 //!    statues cut below the knee or elbow (seeds 90–99) it fires on none, on 2 of 17 cut

@@ -798,10 +798,7 @@ impl WorldSkeleton {
                 continue;
             };
             // (Template loading rejects mirror chains of another length.)
-            if m.len() != c.len() {
-                continue;
-            }
-            if m[tail..].iter().any(|&x| lost[x]) {
+            if m.len() != c.len() || m[tail..].iter().any(|&x| lost[x]) {
                 continue;
             }
             let above: f32 = c[..tail].iter().map(|&b| self.lengths[b]).sum();
@@ -814,13 +811,10 @@ impl WorldSkeleton {
             if !(excess >= share) || !best.is_none_or(|(_, e)| excess > e) {
                 continue;
             }
-            let longest = (0..tail).max_by(|&i, &j| {
-                let r = |k: usize| self.lengths[c[k]] / self.lengths[m[k]].max(f32::MIN_POSITIVE);
-                r(i).total_cmp(&r(j))
-            });
-            if let Some(k) = longest {
-                best = Some((c[k], excess));
-            }
+            // (`tail ≥ 1`: there is a bone above the tail.)
+            let ratio = |k: usize| self.lengths[c[k]] / self.lengths[m[k]].max(f32::MIN_POSITIVE);
+            let longest = (0..tail).max_by(|&i, &j| ratio(i).total_cmp(&ratio(j)));
+            best = longest.map(|k| (c[k], excess));
         }
         best.map(|(b, _)| b)
     }
