@@ -14,6 +14,7 @@ mod cloud_base;
 mod cloud_normals;
 mod cloud_ply;
 mod fakir;
+mod fakir_frame;
 mod geometry_bone;
 mod kiosk_app;
 mod kiosk_attract;

@@ -277,6 +277,7 @@
 //! the limb resets: 22.2 s → 15.9 s).
 
 use super::assign::{AssignParams, Assignment};
+use super::frame::WorkingFrame;
 use super::init::{Candidate, Init, candidates, rescaled};
 use super::schedule::{ScheduleSettings, register_skeleton};
 use super::solver::{Activity, Cancelled, NoPause, Pause, Solver, SolverSettings, template_extent};
@@ -553,8 +554,30 @@ fn assignment_of(
     )
 }
 
-/// The registration algorithm, run to the end with the pause hook `pause`.
+/// The registration algorithm, run to the end with the pause hook `pause`, in the working
+/// units of [`super::frame`] (the fit comes back in the cloud's).
 pub fn register(
+    cloud: &PointCloud,
+    template: Arc<Template>,
+    opts: &RegistrationOptions,
+    pause: &mut dyn Pause,
+) -> Result<Fit> {
+    match WorkingFrame::of(&cloud.positions) {
+        Some(f) if !f.is_identity() => {
+            let fit = register_here(
+                &f.cloud_to_working(cloud),
+                template,
+                &f.options_to_working(opts),
+                pause,
+            )?;
+            Ok(f.fit_from_working(fit))
+        }
+        _ => register_here(cloud, template, opts, pause),
+    }
+}
+
+/// [`register`] in the cloud's own units.
+fn register_here(
     cloud: &PointCloud,
     template: Arc<Template>,
     opts: &RegistrationOptions,
@@ -1755,6 +1778,9 @@ struct ChannelPause {
     msgs: Sender<Msg>,
     progress: Arc<Mutex<Progress>>,
     units: u64,
+    /// The registration's working units, when they are not the cloud's: the published
+    /// skeleton and mean distance are mapped back.
+    frame: Option<WorkingFrame>,
 }
 
 impl Pause for ChannelPause {
@@ -1768,8 +1794,14 @@ impl Pause for ChannelPause {
                 p.units = self.units;
                 if let Some(s) = s {
                     p.activity = s.activity.clone();
-                    p.mean_distance = s.mean_distance();
-                    p.skeleton = Some(s.world.to_skeleton());
+                    let skeleton = s.world.to_skeleton();
+                    (p.mean_distance, p.skeleton) = match &self.frame {
+                        Some(f) => (
+                            s.mean_distance() / f.scale as f64,
+                            Some(f.skeleton_from_working(&skeleton)),
+                        ),
+                        None => (s.mean_distance(), Some(skeleton)),
+                    };
                 }
             }
             if self.msgs.send(Msg::Paused).is_err() {
@@ -1834,6 +1866,7 @@ impl Registration {
                     msgs: msg_tx.clone(),
                     progress,
                     units: 0,
+                    frame: WorkingFrame::of(&cloud.positions).filter(|f| !f.is_identity()),
                 };
                 let r = register(&cloud, template, &opts, &mut pause);
                 let _ = msg_tx.send(Msg::Finished(Box::new(r)));
