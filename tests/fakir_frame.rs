@@ -146,7 +146,9 @@ fn on_one_thread(f: impl FnOnce() + Send) {
 fn a_statue_registers_alike_in_any_power_of_two_units() {
     on_one_thread(|| {
         // Seed 5 in metres, at 2^-40 (about 10^-12) and at 2^100 (about 10^30, where squares
-        // overflow f32 and the registration used to panic): the same fit, scaled. Measured
+        // overflow f32: before the working units a cloud of random points there made the
+        // registration panic, and this statue at 10^18 did not end in 5 minutes): the same
+        // fit, scaled. Measured
         // before the working units, the same statue at ×10⁻¹² had fitted with 11.3% joint
         // error instead of 0.29%.
         let s = statue(5);
@@ -192,5 +194,52 @@ fn a_statue_far_from_the_origin_is_fitted_where_it_stands() {
             / 1.7;
         println!("far statue: joint error {:.2}% of the height", 100.0 * err);
         assert!(err < 0.02, "joint error {err}");
+    });
+}
+
+#[test]
+fn a_statue_on_a_plinth_keeps_its_base_and_scores_in_any_power_of_two_units() {
+    on_one_thread(|| {
+        // Seed 7 on a box plinth of a quarter of its points, in metres and at 2^-30: the base
+        // found (its points, up, top and cut heights) and the candidates' scores come back
+        // exactly scaled, like the skeleton.
+        let s = generate(
+            Arc::new(Template::builtin("human").unwrap()),
+            &SynthOptions {
+                points: 6_000,
+                seed: 7,
+                rigid: true,
+                random_pose: true,
+                proportion_jitter: 0.3,
+                height: 1.7,
+                plinth_share: 0.25,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let t = s.truth.template.clone();
+        let base = register(s.cloud.clone(), t.clone());
+        let scale = 2f32.powi(-30);
+        let fit = register(mapped(&s.cloud, |p| p * scale), t);
+        let (a, b) = (fit.base.as_ref().unwrap(), base.base.as_ref().unwrap());
+        assert_eq!(a.points, b.points);
+        assert_eq!(a.up, b.up);
+        assert_eq!(a.top, b.top * scale);
+        assert_eq!(a.cut, b.cut * scale);
+        assert_eq!(
+            fit.candidate_distances.len(),
+            base.candidate_distances.len()
+        );
+        for (x, y) in fit
+            .candidate_distances
+            .iter()
+            .zip(&base.candidate_distances)
+        {
+            assert!((x - y * scale as f64).abs() <= 1e-12 * y * scale as f64);
+        }
+        assert_eq!(
+            fit.skeleton.root_position,
+            base.skeleton.root_position * scale
+        );
     });
 }

@@ -6,17 +6,19 @@
 //! solver's guards and its tolerances hold absolute constants, and `f32` squares overflow past
 //! about 10¹⁹. Measured before this frame on one synthetic statue (seed 5, 6000 points,
 //! `synth --rigid --height 1.7`, joint error 0.29% of its height) written in other units:
-//! ×10⁻⁶ 6.4%, ×10⁻⁹ 6.8% (a hand taken lost), ×10⁻¹² 11.3%, ×10¹⁸ a panic (squares past
-//! `f32`'s range). In the working units: 0.72%, 0.69%, 0.41% and 0.51% (these scales are
+//! ×10⁻⁶ 6.4%, ×10⁻⁹ 6.8% (a hand taken lost), ×10⁻¹² 11.3%, ×10¹⁸ no end in 5 minutes;
+//! random points near 10³⁰, whose squares pass `f32`'s range, made it panic. In the working units: 0.72%, 0.69%, 0.41% and 0.51% (these scales are
 //! not powers of two, so the cloud differs from the metre one by rounding, and FAKIR's path
 //! with it). Scaled by a power of two, a cloud registers bit for bit like the original (a
-//! test checks it at 2⁻⁴⁰ and 2⁴⁰); at everyday scales (the *Dancing Faun* in millimetres,
-//! the bust at 0.6 m, the papers' chain of length 140) the fits are the same bytes as
-//! before this frame.
+//! test checks it at 2⁻⁴⁰ and 2¹⁰⁰); at everyday scales the fits are as before this frame
+//! (the bust at 0.6 m: the same `FIT.json` bytes; the *Dancing Faun* in millimetres: the
+//! same mean distance and lost set; the papers' chain of length 140: the same work units
+//! and joint error).
 //!
 //! **Choices.**
 //! - The scale is a power of two, `2⁻ᵏ` with the largest bounding-box edge times it in
-//!   `[1, 2)`: multiplying by it is exact in floating point, so a cloud already of that size
+//!   `[1, 2)` (`k` kept within ±125, so the scale stays a normal `f32`: only clouds smaller
+//!   than about 2⁻¹²⁴ or larger than 2¹²⁶ keep a working size outside `[1, 2)`): multiplying by it is exact in floating point, so a cloud already of that size
 //!   (every synthetic statue of height 1.7 the tests and benchmarks use: their largest edges
 //!   lie between 1.2 and 1.9) is registered bit for bit as before, and mapping the fit back
 //!   loses nothing.

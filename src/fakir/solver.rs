@@ -61,7 +61,8 @@ impl Activity {
 /// Called after every work unit; returning `Err(Cancelled)` stops the registration.
 pub trait Pause {
     /// `solver`: the solver whose unit ended, or `None` for a unit of set-up work between
-    /// solvers (placing the candidates, starting a level).
+    /// solvers (placing the candidates, starting a level). Its skeleton and distances are in
+    /// the registration's working units ([`super::frame`]), not necessarily the cloud's.
     fn unit(&mut self, solver: Option<&Solver>) -> Result<(), Cancelled>;
 
     /// True when the hook never pauses, never cancels and reads nothing: the registration may
