@@ -11,9 +11,9 @@
 //! not powers of two, so the cloud differs from the metre one by rounding, and FAKIR's path
 //! with it). Scaled by a power of two, a cloud registers bit for bit like the original (a
 //! test checks it at 2⁻⁴⁰ and 2¹⁰⁰); at everyday scales the fits are as before this frame
-//! (the bust at 0.6 m: the same `FIT.json` bytes; the *Dancing Faun* in millimetres: the
-//! same mean distance and lost set; the papers' chain of length 140: the same work units
-//! and joint error).
+//! (the bust and *Zenobia* at ×2, the *Venus* at ×½, TOSCA *Victoria 0* at ×2⁻⁷: the same
+//! `FIT.json` bytes; the *Dancing Faun* in millimetres: the same mean distance and lost set;
+//! the papers' chain of length 140: the same work units and joint error).
 //!
 //! **Choices.**
 //! - The scale is a power of two, `2⁻ᵏ` with the largest bounding-box edge times it in
