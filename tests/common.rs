@@ -52,3 +52,13 @@ pub fn cut_bones(s: &pygmalion::synth::SynthStatue) -> Vec<bool> {
     }
     counts.iter().map(|&c| c == 0).collect()
 }
+
+/// Runs `f` on a rayon pool of one thread of its own, so the kiosk's frame-budget test running
+/// beside a long registration does not queue behind its parallel loops.
+pub fn on_one_thread(f: impl FnOnce() + Send) {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap()
+        .install(f)
+}

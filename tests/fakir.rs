@@ -1,5 +1,6 @@
 //! Tests of `fakir`: the papers' chain experiment, LM derivatives, whole-skeleton registration.
 
+use crate::common::on_one_thread;
 use pygmalion::anatomy::Skeleton;
 use pygmalion::fakir::assign::{AssignParams, Assignment};
 use pygmalion::fakir::schedule::{ScheduleSettings, register_chain};
@@ -883,16 +884,6 @@ fn sphere_directions_cover_the_sphere_evenly() {
         let best = d.iter().map(|v| v.dot(probe)).fold(-1.0f32, f32::max);
         assert!(best > 20f32.to_radians().cos(), "{probe:?}: {best}");
     }
-}
-
-/// Runs `f` on a rayon pool of one thread of its own, so the kiosk's frame-budget test running
-/// beside a long registration does not queue behind its parallel loops.
-fn on_one_thread(f: impl FnOnce() + Send) {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .unwrap()
-        .install(f)
 }
 
 #[test]

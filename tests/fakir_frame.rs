@@ -3,6 +3,7 @@
 //! far from the origin; a statue registers bit for bit alike in any power-of-two units
 //! (tiny ones, and ones whose squares overflow `f32`), and a statue far from the origin fits.
 
+use crate::common::on_one_thread;
 use pygmalion::anatomy::{Skeleton, Template};
 use pygmalion::cloud::PointCloud;
 use pygmalion::fakir::frame::{FAR, WorkingFrame};
@@ -132,14 +133,6 @@ fn register(cloud: PointCloud, template: Arc<Template>) -> Fit {
         .unwrap()
         .run_to_convergence()
         .unwrap()
-}
-
-fn on_one_thread(f: impl FnOnce() + Send) {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .unwrap()
-        .install(f)
 }
 
 #[test]
