@@ -757,7 +757,7 @@ fn registration_fits_rest_pose_quadruped_centaur_and_mermaid() {
 }
 
 /// A synthetic human in a random pose with ±30% proportions (the test population).
-fn posed_human(seed: u64, points: usize) -> SynthStatue {
+pub(crate) fn posed_human(seed: u64, points: usize) -> SynthStatue {
     cut_human(seed, points, &[])
 }
 

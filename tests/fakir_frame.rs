@@ -4,12 +4,13 @@
 //! (tiny ones, and ones whose squares overflow `f32`), and a statue far from the origin fits.
 
 use crate::common::on_one_thread;
+use crate::fakir::posed_human;
 use pygmalion::anatomy::{Skeleton, Template};
 use pygmalion::cloud::PointCloud;
 use pygmalion::fakir::frame::{FAR, WorkingFrame};
 use pygmalion::fakir::{Fit, Registration, RegistrationOptions};
 use pygmalion::math::{Quat, Vec3};
-use pygmalion::synth::{SynthOptions, SynthStatue, generate};
+use pygmalion::synth::{SynthOptions, generate};
 use std::sync::Arc;
 
 #[test]
@@ -98,23 +99,6 @@ fn a_skeleton_goes_to_the_working_units_and_back_unchanged() {
     }
 }
 
-/// A posed synthetic statue (6000 points, ±30% proportions, a random rigid motion).
-fn statue(seed: u64) -> SynthStatue {
-    generate(
-        Arc::new(Template::builtin("human").unwrap()),
-        &SynthOptions {
-            points: 6_000,
-            seed,
-            rigid: true,
-            random_pose: true,
-            proportion_jitter: 0.3,
-            height: 1.7,
-            ..Default::default()
-        },
-    )
-    .unwrap()
-}
-
 /// The cloud with every position mapped by `f`.
 fn mapped(cloud: &PointCloud, f: impl Fn(Vec3) -> Vec3) -> PointCloud {
     PointCloud {
@@ -144,7 +128,7 @@ fn a_statue_registers_alike_in_any_power_of_two_units() {
         // fit, scaled. Measured
         // before the working units, the same statue at ×10⁻¹² had fitted with 11.3% joint
         // error instead of 0.29%.
-        let s = statue(5);
+        let s = posed_human(5, 6_000);
         let t = s.truth.template.clone();
         let base = register(s.cloud.clone(), t.clone());
         for k in [-40, 100] {
@@ -174,7 +158,7 @@ fn a_statue_far_from_the_origin_is_fitted_where_it_stands() {
         // error (the joints could not move by less than those steps); shifted to the
         // origin it fits (measured when written: 0.84% with the CLI's options, against 0.29%
         // at the origin). Tolerance: the 2% of the height.
-        let s = statue(5);
+        let s = posed_human(5, 6_000);
         let off = Vec3::splat(1e5);
         let fit = register(mapped(&s.cloud, |p| p + off), s.truth.template.clone());
         let (a, b) = (fit.skeleton.pose().joints, s.truth.pose().joints);

@@ -7,9 +7,9 @@
 //! about 10¹⁹. Measured before this frame on one synthetic statue (seed 5, 6000 points,
 //! `synth --rigid --height 1.7`, joint error 0.29% of its height) written in other units:
 //! ×10⁻⁶ 6.4%, ×10⁻⁹ 6.8% (a hand taken lost), ×10⁻¹² 11.3%, ×10¹⁸ no end in 5 minutes;
-//! random points near 10³⁰, whose squares pass `f32`'s range, made it panic. In the working units: 0.72%, 0.69%, 0.41% and 0.51% (these scales are
-//! not powers of two, so the cloud differs from the metre one by rounding, and FAKIR's path
-//! with it). Scaled by a power of two, a cloud registers bit for bit like the original (a
+//! random points near 10³⁰, whose squares pass `f32`'s range, made it panic. In the working
+//! units: 0.72%, 0.69%, 0.41% and 0.51% (these scales are not powers of two, so the cloud
+//! differs from the metre one by rounding, and FAKIR's path with it). Scaled by a power of two, a cloud registers bit for bit like the original (a
 //! test checks it at 2⁻⁴⁰ and 2¹⁰⁰); at everyday scales the fits are as before this frame
 //! (the bust and *Zenobia* at ×2, the *Venus* at ×½, TOSCA *Victoria 0* at ×2⁻⁷: the same
 //! `FIT.json` bytes; the *Dancing Faun* in millimetres: the same mean distance and lost set;
@@ -18,8 +18,8 @@
 //! **Choices.**
 //! - The scale is a power of two, `2⁻ᵏ` with the largest bounding-box edge times it in
 //!   `[1, 2)` (`k` kept within ±125, so the scale stays a normal `f32`: only clouds smaller
-//!   than about 2⁻¹²⁴ or larger than 2¹²⁶ keep a working size outside `[1, 2)`): multiplying by it is exact in floating point, so a cloud already of that size
-//!   (every synthetic statue of height 1.7 the tests and benchmarks use: their largest edges
+//!   than about 2⁻¹²⁴ or larger than 2¹²⁶ keep a working size outside `[1, 2)`). Multiplying
+//!   by it is exact in floating point, so a cloud already of that size (every synthetic statue of height 1.7 the tests and benchmarks use: their largest edges
 //!   lie between 1.2 and 1.9) is registered bit for bit as before, and mapping the fit back
 //!   loses nothing.
 //! - The shift is the bounding box's centre, applied only when that centre lies farther from
@@ -38,7 +38,7 @@
 use super::Init;
 use super::registration::{Fit, RegistrationOptions};
 use crate::anatomy::Skeleton;
-use crate::cloud::PointCloud;
+use crate::cloud::{Aabb, PointCloud};
 use crate::math::Vec3;
 
 /// A cloud whose bounding-box centre lies farther from the origin than this many times its
@@ -59,15 +59,12 @@ impl WorkingFrame {
     /// nothing to map: no point, a coordinate that is not finite, all points at one place
     /// (the registration reports these itself).
     pub fn of(positions: &[Vec3]) -> Option<WorkingFrame> {
-        let first = *positions.first()?;
-        let (mut lo, mut hi) = (first.as_dvec3(), first.as_dvec3());
-        for p in positions {
-            if !p.is_finite() {
-                return None;
-            }
-            lo = lo.min(p.as_dvec3());
-            hi = hi.max(p.as_dvec3());
+        if !positions.iter().all(|p| p.is_finite()) {
+            return None;
         }
+        let bb = Aabb::of(positions)?;
+        // In f64: the edges of a box spanning most of f32's range overflow f32.
+        let (lo, hi) = (bb.min.as_dvec3(), bb.max.as_dvec3());
         let size = (hi - lo).max_element();
         if !(size > 0.0) {
             return None;

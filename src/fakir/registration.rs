@@ -562,8 +562,24 @@ pub fn register(
     opts: &RegistrationOptions,
     pause: &mut dyn Pause,
 ) -> Result<Fit> {
-    match WorkingFrame::of(&cloud.positions) {
-        Some(f) if !f.is_identity() => {
+    register_in(working_frame(cloud), cloud, template, opts, pause)
+}
+
+/// The working units of [`register`] for `cloud`; `None` when they are the cloud's own.
+fn working_frame(cloud: &PointCloud) -> Option<WorkingFrame> {
+    WorkingFrame::of(&cloud.positions).filter(|f| !f.is_identity())
+}
+
+/// [`register`] in the working units `frame` ([`working_frame`]; `None`: the cloud's).
+fn register_in(
+    frame: Option<WorkingFrame>,
+    cloud: &PointCloud,
+    template: Arc<Template>,
+    opts: &RegistrationOptions,
+    pause: &mut dyn Pause,
+) -> Result<Fit> {
+    match frame {
+        Some(f) => {
             let fit = register_here(
                 &f.cloud_to_working(cloud),
                 template,
@@ -572,7 +588,7 @@ pub fn register(
             )?;
             Ok(f.fit_from_working(fit))
         }
-        _ => register_here(cloud, template, opts, pause),
+        None => register_here(cloud, template, opts, pause),
     }
 }
 
@@ -1860,15 +1876,16 @@ impl Registration {
                 self.progress.clone(),
             );
             let handle = std::thread::spawn(move || {
+                let frame = working_frame(&cloud);
                 let mut pause = ChannelPause {
                     deadline,
                     cmds: cmd_rx,
                     msgs: msg_tx.clone(),
                     progress,
                     units: 0,
-                    frame: WorkingFrame::of(&cloud.positions).filter(|f| !f.is_identity()),
+                    frame,
                 };
-                let r = register(&cloud, template, &opts, &mut pause);
+                let r = register_in(frame, &cloud, template, &opts, &mut pause);
                 let _ = msg_tx.send(Msg::Finished(Box::new(r)));
             });
             self.worker = Some((cmd_tx, msg_rx, handle));
