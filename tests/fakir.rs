@@ -640,6 +640,73 @@ fn registration_rejects_clouds_it_cannot_fit() {
     assert!(r.is_err_and(|e| e.to_string().contains("non-finite")));
 }
 
+/// Points in a tilted square, `thickness` thick (relative to its side 2), 3000 of them.
+fn tilted_slab(thickness: f32) -> Vec<Vec3> {
+    use pygmalion::rng::Rng;
+    let mut rng = Rng::new(7);
+    let q = Quat::from_euler(pygmalion::math::EulerRot::XYZ, 0.4, 0.7, 0.2);
+    (0..3000)
+        .map(|_| {
+            let p = Vec3::new(
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                thickness * rng.range(-1.0, 1.0),
+            );
+            q * p + Vec3::new(3.0, -2.0, 1.0)
+        })
+        .collect()
+}
+
+#[test]
+fn clouds_on_a_plane_or_a_line_in_any_direction_are_refused_and_figures_are_not() {
+    use pygmalion::anatomy::Template;
+    use pygmalion::cloud::PointCloud;
+    use pygmalion::fakir::registration::{FLAT_SPREAD, check_spread};
+    use pygmalion::fakir::{Registration, RegistrationOptions};
+    use std::sync::Arc;
+    // A flat square tilted in space (its bounding box is no thinner than a statue's), and one
+    // with a thickness of a tenth of the limit, are planes; at 3 times the limit, not.
+    for t in [0.0, 0.1 * FLAT_SPREAD] {
+        let e = check_spread(&tilted_slab(t)).unwrap_err().to_string();
+        assert!(e.contains("lie on a plane"), "{t}: {e}");
+    }
+    assert!(check_spread(&tilted_slab(3.0 * FLAT_SPREAD)).is_ok());
+    // A line along a diagonal.
+    let line: Vec<Vec3> = (0..2000)
+        .map(|i| Vec3::new(1.0, 2.0, -0.5) * i as f32 + Vec3::splat(0.25))
+        .collect();
+    let e = check_spread(&line).unwrap_err().to_string();
+    assert!(e.contains("lie on a line"), "{e}");
+    // Statues of every built-in template, at rest and posed, are figures.
+    for name in ["human", "centaur", "quadruped", "mermaid"] {
+        let t = Arc::new(Template::builtin(name).unwrap());
+        for rest in [true, false] {
+            let s = pygmalion::synth::generate(
+                t.clone(),
+                &pygmalion::synth::SynthOptions {
+                    points: 3000,
+                    seed: 3,
+                    random_pose: !rest,
+                    rigid: true,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            assert!(check_spread(&s.cloud.positions).is_ok(), "{name} {rest}");
+        }
+    }
+    // Registration ends with the message.
+    let t = Arc::new(Template::builtin("human").unwrap());
+    let r = Registration::new(
+        Arc::new(PointCloud::from_positions(tilted_slab(0.0))),
+        t,
+        RegistrationOptions::default(),
+    )
+    .unwrap()
+    .run_to_convergence();
+    assert!(r.is_err_and(|e| e.to_string().contains("lie on a plane")));
+}
+
 #[test]
 fn incremental_culled_assignment_equals_a_full_recomputation() {
     use pygmalion::fakir::lm::{Param, apply};
