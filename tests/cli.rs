@@ -123,6 +123,84 @@ fn info_synth_normals_and_register_write_what_they_promise() {
 }
 
 #[test]
+fn fit_json_support_flags_agree_with_its_lists() {
+    use pygmalion::anatomy::{Skeleton, Template};
+    use pygmalion::cli::FitReport;
+    use pygmalion::fakir::Fit;
+    use pygmalion::fakir::support::BoneSupport;
+    use std::sync::Arc;
+    let t = Arc::new(Template::builtin("human").unwrap());
+    let nb = t.bones.len();
+    let bone = |name: &str| t.bone_index(name).unwrap();
+    // Coverage bands as the support measured them: the head uncovered (a trunk bone, never
+    // lost), the left forearm and hand covered but lost (laid over another part), the right
+    // shin partly covered.
+    let mut support: Vec<BoneSupport> = t
+        .bones
+        .iter()
+        .map(|b| BoneSupport {
+            bone: b.name.clone(),
+            coverage: 1.0,
+            reach: 1.0,
+            missing: false,
+            partial: false,
+            shrunk: false,
+        })
+        .collect();
+    support[bone("head")].coverage = 0.3;
+    support[bone("head")].missing = true;
+    support[bone("r_shin")].coverage = 0.6;
+    support[bone("r_shin")].partial = true;
+    support[bone("l_forearm")].coverage = 0.6;
+    support[bone("l_forearm")].partial = true;
+    let mut missing = vec![false; nb];
+    missing[bone("l_forearm")] = true;
+    missing[bone("l_hand")] = true;
+    let fit = Fit {
+        skeleton: Skeleton::rest(t.clone()),
+        labels: Vec::new(),
+        mean_distance: 0.0,
+        base: None,
+        bone_counts: vec![0; nb],
+        iterations: 0,
+        units: 0,
+        candidate: 0,
+        candidate_distances: Vec::new(),
+        support,
+        missing,
+    };
+    let v = serde_json::to_value(FitReport::new(&fit, std::path::Path::new("x.ply"))).unwrap();
+    let names = |key: &str| -> Vec<String> {
+        v[key]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_str().unwrap().to_string())
+            .collect()
+    };
+    assert_eq!(names("missing"), ["l_forearm", "l_hand"]);
+    assert_eq!(names("partial"), ["r_shin"]);
+    for s in v["support"].as_array().unwrap() {
+        let b = s["bone"].as_str().unwrap().to_string();
+        assert_eq!(
+            s["missing"].as_bool(),
+            Some(names("missing").contains(&b)),
+            "{b}"
+        );
+        assert_eq!(
+            s["partial"].as_bool(),
+            Some(names("partial").contains(&b)),
+            "{b}"
+        );
+    }
+    // The coverage stays as measured.
+    assert_eq!(
+        v["support"][bone("head")]["coverage"].as_f64(),
+        Some(0.3f32 as f64)
+    );
+}
+
+#[test]
 fn bad_input_is_an_error_naming_the_file() {
     let dir = crate::common::scratch("cli_bad");
     let bad = dir.join("broken.ply");

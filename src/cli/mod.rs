@@ -24,6 +24,7 @@ use clap::{Parser, Subcommand};
 mod kiosk;
 mod picture;
 pub(crate) mod register;
+pub use register::FitReport;
 mod repose;
 mod restore;
 use std::ffi::OsString;

@@ -68,7 +68,12 @@ pub struct FitReport {
     pub missing: Vec<String>,
     /// Bones only partly covered by the scan (a limb broken part-way along them).
     pub partial: Vec<String>,
-    /// The support of every bone: covered share of its surface, axial reach.
+    /// The support of every bone: covered share of its surface, axial reach. Its `missing`
+    /// and `partial` flags are the verdicts of the two lists above, so the report never
+    /// contradicts itself: coverage alone would flag a trunk bone under 0.4 (a head the fit
+    /// laid badly), which is never lost (the trunk carries the figure), and a lost bone's
+    /// coverage may lie anywhere (the lost-limb rules of `crate::fakir::registration` also
+    /// take covered bones laid over another part).
     pub support: Vec<crate::fakir::support::BoneSupport>,
 }
 
@@ -90,6 +95,20 @@ impl FitReport {
     pub fn new(fit: &Fit, source: &Path) -> Self {
         let j = fit.skeleton.to_json();
         let t = &fit.skeleton.template;
+        // The support's flags as the registration decided (see `FitReport::support`).
+        let support: Vec<crate::fakir::support::BoneSupport> = fit
+            .support
+            .iter()
+            .enumerate()
+            .map(|(k, s)| {
+                let lost = fit.missing.get(k).copied().unwrap_or(false);
+                crate::fakir::support::BoneSupport {
+                    missing: lost,
+                    partial: s.partial && !lost,
+                    ..s.clone()
+                }
+            })
+            .collect();
         FitReport {
             template: j.template,
             source: source.display().to_string(),
@@ -114,14 +133,12 @@ impl FitReport {
                 points: b.points.len(),
             }),
             missing: fit.missing_names().into_iter().map(String::from).collect(),
-            partial: fit
-                .support
+            partial: support
                 .iter()
-                .zip(&fit.missing)
-                .filter(|(s, m)| s.partial && !**m)
-                .map(|(s, _)| s.bone.clone())
+                .filter(|s| s.partial)
+                .map(|s| s.bone.clone())
                 .collect(),
-            support: fit.support.clone(),
+            support,
         }
     }
 }
