@@ -677,6 +677,10 @@ fn clouds_on_a_plane_or_a_line_in_any_direction_are_refused_and_figures_are_not(
         .collect();
     let e = check_spread(&line).unwrap_err().to_string();
     assert!(e.contains("lie on a line"), "{e}");
+    // Spreads that are not finite are refused; an empty cloud is left to the point count.
+    assert!(check_spread(&[Vec3::NAN; 30]).is_err());
+    assert!(check_spread(&[Vec3::splat(1e30), Vec3::splat(-1e30), Vec3::X]).is_err());
+    assert!(check_spread(&[]).is_ok());
     // Statues of every built-in template, at rest and posed, are figures.
     for name in ["human", "centaur", "quadruped", "mermaid"] {
         let t = Arc::new(Template::builtin(name).unwrap());
@@ -705,6 +709,41 @@ fn clouds_on_a_plane_or_a_line_in_any_direction_are_refused_and_figures_are_not(
     .unwrap()
     .run_to_convergence();
     assert!(r.is_err_and(|e| e.to_string().contains("lie on a plane")));
+    // A flat panel standing on a block plinth: the whole cloud has depth, the figure off the
+    // base has none.
+    let mut rng = pygmalion::rng::Rng::new(2);
+    let mut panel: Vec<Vec3> = (0..6000)
+        .map(|_| {
+            let mut p = [
+                rng.range(-0.5, 0.5),
+                rng.range(0.0, 0.3),
+                rng.range(-0.5, 0.5),
+            ];
+            let face = rng.below(6);
+            let (lo, hi) = ([-0.5, 0.0, -0.5], [0.5, 0.3, 0.5]);
+            p[face / 2] = if face.is_multiple_of(2) {
+                lo[face / 2]
+            } else {
+                hi[face / 2]
+            };
+            Vec3::from_array(p)
+        })
+        .collect();
+    panel.extend((0..12000).map(|_| Vec3::new(rng.range(-0.3, 0.3), rng.range(0.3, 2.0), 0.0)));
+    assert!(check_spread(&panel).is_ok());
+    let t = Arc::new(Template::builtin("human").unwrap());
+    let r = Registration::new(
+        Arc::new(PointCloud::from_positions(panel)),
+        t,
+        RegistrationOptions::default(),
+    )
+    .unwrap()
+    .run_to_convergence();
+    let e = r.expect_err("refused").to_string();
+    assert!(
+        e.contains("off the base") && e.contains("lie on a plane"),
+        "{e}"
+    );
 }
 
 #[test]

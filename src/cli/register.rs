@@ -71,9 +71,9 @@ pub struct FitReport {
     /// The support of every bone: covered share of its surface, axial reach. Its `missing`
     /// and `partial` flags are the verdicts of the two lists above, so the report never
     /// contradicts itself: coverage alone would flag a trunk bone under 0.4 (a head the fit
-    /// laid badly), which is never lost (the trunk carries the figure), and a lost bone's
-    /// coverage may lie anywhere (the lost-limb rules of `crate::fakir::registration` also
-    /// take covered bones laid over another part).
+    /// laid badly) missing, but the trunk carries the figure and is never lost, so such a
+    /// bone is listed partial; and a lost bone's coverage may lie anywhere (the lost-limb
+    /// rules of `crate::fakir::registration` also take covered bones laid over another part).
     pub support: Vec<crate::fakir::support::BoneSupport>,
 }
 
@@ -104,7 +104,8 @@ impl FitReport {
                 let lost = fit.missing.get(k).copied().unwrap_or(false);
                 crate::fakir::support::BoneSupport {
                     missing: lost,
-                    partial: s.partial && !lost,
+                    // Under 0.4 coverage but not lost (a trunk bone): partly covered.
+                    partial: (s.partial || s.missing) && !lost,
                     ..s.clone()
                 }
             })

@@ -517,26 +517,32 @@ fn prepare(cloud: &PointCloud, template: &Template) -> Result<Vec<Vec3>> {
 pub const FLAT_SPREAD: f32 = 0.01;
 
 /// The least second principal spread, relative to the largest, of a cloud that is not a line
-/// (the bounding-box test above only catches lines along an axis).
+/// (the bounding-box test of `prepare` only catches lines along an axis).
 pub const LINE_SPREAD: f32 = 1e-3;
 
 /// Refuses clouds whose points lie (nearly) on a line or a plane, in any direction, by their
-/// principal spreads ([`LINE_SPREAD`], [`FLAT_SPREAD`]); [`register`] checks this before it
-/// estimates normals.
+/// principal spreads ([`LINE_SPREAD`], [`FLAT_SPREAD`]); [`register`] checks the whole cloud
+/// before it estimates normals, and the figure again once a base is set aside (a flat panel on
+/// a block plinth). An empty cloud passes (the point count is checked apart); spreads that are
+/// not finite (coordinates past `f32`'s squares, or NaN) are refused.
 pub fn check_spread(positions: &[Vec3]) -> Result<()> {
     let Some(p) = crate::geometry::pca::pca(positions) else {
         return Ok(());
     };
     let [s0, s1, s2] = p.variances.map(|v| v.max(0.0).sqrt());
-    if s1 <= LINE_SPREAD * s0 {
+    if !s0.is_finite() {
+        return Err(Error::input(
+            "degenerate cloud: the spread of its points is not finite",
+        ));
+    }
+    if !(s1 > LINE_SPREAD * s0) {
         return Err(Error::input("degenerate cloud: the points lie on a line"));
     }
-    if s2 <= FLAT_SPREAD * s0 {
+    if !(s2 > FLAT_SPREAD * s0) {
         return Err(Error::input(format!(
-            "degenerate cloud: the points lie on a plane (their spread across it is {:.2}% of \
-             their spread along it; a figure's is over {:.0}%)",
+            "degenerate cloud: the points lie on a plane (their spread across it is {:.3}% of \
+             their spread along it; every statue and figure measured is over 14%)",
             100.0 * s2 / s0,
-            100.0 * FLAT_SPREAD,
         )));
     }
     Ok(())
@@ -665,6 +671,8 @@ fn register_here(
     let n = positions.len();
     if figure.is_some() {
         check_point_count(n, &template, "off the base")?;
+        check_spread(positions)
+            .map_err(|e| Error::input(format!("the figure off the base: {e}")))?;
     }
     let init = match (&opts.init, &base) {
         (Init::Auto | Init::Up(_), Some(b)) => Init::Up(b.up),
