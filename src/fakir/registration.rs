@@ -496,11 +496,6 @@ fn prepare(cloud: &PointCloud, template: &Template) -> Result<Vec<Vec3>> {
     if !(size.max_element() > 0.0) {
         return Err(Error::input("degenerate cloud: all points coincide"));
     }
-    let mut sorted = [size.x, size.y, size.z];
-    sorted.sort_by(f32::total_cmp);
-    if sorted[1] <= 1e-6 * sorted[2] {
-        return Err(Error::input("degenerate cloud: the points lie on a line"));
-    }
     check_spread(&cloud.positions)?;
     match &cloud.normals {
         Some(n) if n.len() == cloud.len() => Ok(n.clone()),
@@ -517,7 +512,7 @@ fn prepare(cloud: &PointCloud, template: &Template) -> Result<Vec<Vec3>> {
 pub const FLAT_SPREAD: f32 = 0.01;
 
 /// The least second principal spread, relative to the largest, of a cloud that is not a line
-/// (the bounding-box test of `prepare` only catches lines along an axis).
+/// (in any direction: a bounding-box test, used before, only caught lines along an axis).
 pub const LINE_SPREAD: f32 = 1e-3;
 
 /// Refuses clouds whose points lie (nearly) on a line or a plane, in any direction, by their
