@@ -681,6 +681,8 @@ fn clouds_on_a_plane_or_a_line_in_any_direction_are_refused_and_figures_are_not(
     assert!(check_spread(&[Vec3::NAN; 30]).is_err());
     assert!(check_spread(&[Vec3::splat(1e30), Vec3::splat(-1e30), Vec3::X]).is_err());
     assert!(check_spread(&[]).is_ok());
+    let e = check_spread(&[Vec3::ONE; 30]).unwrap_err().to_string();
+    assert!(e.contains("all points coincide"), "{e}");
     // Statues of every built-in template, at rest and posed, are figures.
     for name in ["human", "centaur", "quadruped", "mermaid"] {
         let t = Arc::new(Template::builtin(name).unwrap());

@@ -1,6 +1,6 @@
-//! The registration's working units (our choice; the papers are silent): the cloud is
-//! brought to a size between 1 and 2 by a power of two, and shifted to the origin when it
-//! lies far from it, before anything is fitted; the fit is mapped back at the end.
+//! The registration's working units (our choice; the papers are silent): the cloud is brought to a
+//! size between 1 and 2 by a power of two, and shifted to the origin when it lies far from it,
+//! before anything is fitted; the fit is mapped back at the end.
 //!
 //! FAKIR's numbers are not all relative to the statue: the projection's degenerate cases, the
 //! solver's guards and its tolerances hold absolute constants, and `f32` squares overflow past
@@ -9,31 +9,31 @@
 //! ×10⁻⁶ 6.4%, ×10⁻⁹ 6.8% (a hand taken lost), ×10⁻¹² 11.3%, ×10¹⁸ no end in 5 minutes;
 //! random points near 10³⁰, whose squares pass `f32`'s range, made it panic. In the working
 //! units: 0.72%, 0.69%, 0.41% and 0.51% (these scales are not powers of two, so the cloud
-//! differs from the metre one by rounding, and FAKIR's path with it). Scaled by a power of two, a cloud registers bit for bit like the original (a
-//! test checks it at 2⁻⁴⁰ and 2¹⁰⁰); at everyday scales the fits are as before this frame
-//! (the bust and *Zenobia* at ×2, the *Venus* at ×½, TOSCA *Victoria 0* at ×2⁻⁷: the same
-//! `FIT.json` bytes; the *Dancing Faun* in millimetres: the same mean distance and lost set;
-//! the papers' chain of length 140: the same work units and joint error).
+//! differs from the metre one by rounding, and FAKIR's path with it). Scaled by a power of
+//! two, a cloud registers bit for bit like the original (a test checks it at 2⁻⁴⁰ and 2¹⁰⁰);
+//! at everyday scales the fits are as before this frame (the bust and *Zenobia* at ×2, the
+//! *Venus* at ×½, TOSCA *Victoria 0* at ×2⁻⁷: the same `FIT.json` bytes; the *Dancing Faun*
+//! in millimetres: the same mean distance and lost set; the papers' chain of length 140: the
+//! same work units and joint error).
 //!
 //! **Choices.**
-//! - The scale is a power of two, `2⁻ᵏ` with the largest bounding-box edge times it in
-//!   `[1, 2)` (`k` kept within ±125, so the scale stays a normal `f32`: only clouds smaller
-//!   than about 2⁻¹²⁴ or larger than 2¹²⁶ keep a working size outside `[1, 2)`). Multiplying
-//!   by it is exact in floating point, so a cloud already of that size (every synthetic statue of height 1.7 the tests and benchmarks use: their largest edges
-//!   lie between 1.2 and 1.9) is registered bit for bit as before, and mapping the fit back
-//!   loses nothing.
-//! - The shift is the bounding box's centre, applied only when that centre lies farther from
-//!   the origin than [`FAR`] (2¹⁴) times the largest edge: there `f32` steps are coarser
-//!   than about 2⁻¹⁰ of the statue's size, and the bones' joints, held in the cloud's
-//!   coordinates, cannot move by less. The same statue (seed 5) moved 10⁵ along each axis
-//!   (about 1.1 × 10⁵ times its size) had fitted with 29% joint error, and fits with 0.84%
-//!   shifted; moved 10⁴ it had fitted with 0.68% unshifted. Nearer clouds are not shifted:
-//!   a shift is not exact in floating point, and FAKIR's path through its many starts and
-//!   checks turns rounding differences into different fits (moved 10³ and shifted for a
-//!   trial, the same statue came out at 5.4% instead of 1.0%).
-//! - The options that hold positions or sizes (a given anchor, a given skeleton) are mapped
-//!   in, and everything of the fit that is a length or a position is mapped out: the
-//!   skeleton, the mean distance, the candidates' scores and the base's heights.
+//! - The scale is a power of two, `2⁻ᵏ` with the largest bounding-box edge times it in `[1, 2)`
+//!   (`k` kept within ±125, so the scale stays a normal `f32`: only clouds smaller than about 2⁻¹²⁴
+//!   or larger than 2¹²⁶ keep a working size outside `[1, 2)`). Multiplying by it is exact in
+//!   floating point, so a cloud already of that size (every synthetic statue of height 1.7 the
+//!   tests and benchmarks use: their largest edges lie between 1.2 and 1.9) is registered bit for
+//!   bit as before, and mapping the fit back loses nothing.
+//! - The shift is the bounding box's centre, applied only when that centre lies farther from the
+//!   origin than [`FAR`] (2¹⁴) times the largest edge: there `f32` steps are coarser than about
+//!   2⁻¹⁰ of the statue's size, and the bones' joints, held in the cloud's coordinates, cannot move
+//!   by less. The same statue (seed 5) moved 10⁵ along each axis (about 1.1 × 10⁵ times its size)
+//!   had fitted with 29% joint error, and fits with 0.84% shifted; moved 10⁴ it had fitted with
+//!   0.68% unshifted. Nearer clouds are not shifted: a shift is not exact in floating point, and
+//!   FAKIR's path through its many starts and checks turns rounding differences into different fits
+//!   (moved 10³ and shifted for a trial, the same statue came out at 5.4% instead of 1.0%).
+//! - The options that hold positions or sizes (a given anchor, a given skeleton) are mapped in, and
+//!   everything of the fit that is a length or a position is mapped out: the skeleton, the mean
+//!   distance, the candidates' scores and the base's heights.
 
 use super::Init;
 use super::registration::{Fit, RegistrationOptions};

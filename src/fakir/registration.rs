@@ -491,11 +491,6 @@ fn prepare(cloud: &PointCloud, template: &Template) -> Result<Vec<Vec3>> {
             "point {i} has a non-finite coordinate"
         )));
     }
-    let bb = cloud.bounding_box().expect("non-empty");
-    let size = bb.size();
-    if !(size.max_element() > 0.0) {
-        return Err(Error::input("degenerate cloud: all points coincide"));
-    }
     check_spread(&cloud.positions)?;
     match &cloud.normals {
         Some(n) if n.len() == cloud.len() => Ok(n.clone()),
@@ -515,11 +510,12 @@ pub const FLAT_SPREAD: f32 = 0.01;
 /// (in any direction: a bounding-box test, used before, only caught lines along an axis).
 pub const LINE_SPREAD: f32 = 1e-3;
 
-/// Refuses clouds whose points lie (nearly) on a line or a plane, in any direction, by their
-/// principal spreads ([`LINE_SPREAD`], [`FLAT_SPREAD`]); [`register`] checks the whole cloud
-/// before it estimates normals, and the figure again once a base is set aside (a flat panel on
-/// a block plinth). An empty cloud passes (the point count is checked apart); spreads that are
-/// not finite (coordinates past `f32`'s squares, or NaN) are refused.
+/// Refuses clouds whose points coincide, or lie (nearly) on a line or a plane, in any
+/// direction, by their principal spreads ([`LINE_SPREAD`], [`FLAT_SPREAD`]); [`register`]
+/// checks the whole cloud before it estimates normals, and the figure again once a base is
+/// set aside (a flat panel on a block plinth). An empty cloud passes (the point count is
+/// checked apart); spreads that are not finite (coordinates past `f32`'s squares, or NaN)
+/// are refused.
 pub fn check_spread(positions: &[Vec3]) -> Result<()> {
     let Some(p) = crate::geometry::pca::pca(positions) else {
         return Ok(());
@@ -529,6 +525,9 @@ pub fn check_spread(positions: &[Vec3]) -> Result<()> {
         return Err(Error::input(
             "degenerate cloud: the spread of its points is not finite",
         ));
+    }
+    if !(s0 > 0.0) {
+        return Err(Error::input("degenerate cloud: all points coincide"));
     }
     if !(s1 > LINE_SPREAD * s0) {
         return Err(Error::input("degenerate cloud: the points lie on a line"));
