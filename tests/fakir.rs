@@ -344,7 +344,8 @@ fn the_mean_spacing_summed_in_slices_is_the_mean_spacing_bit_for_bit() {
 fn sliced_lm_sums_equal_the_unsliced_sums_bit_for_bit() {
     use pygmalion::fakir::assign::CHUNK;
     use pygmalion::fakir::lm::{
-        EnergyAccumulator, EnergyTerms, NormalAccumulator, Param, apply, normal_equations,
+        EnergyAccumulator, EnergyTerms, NO_ROW, NormalAccumulator, Param, RangePrior, Rows, apply,
+        normal_equations,
     };
     use pygmalion::fakir::world::RadiusClasses;
     // About 7500 points per bone: several chunks each.
@@ -432,6 +433,65 @@ fn sliced_lm_sums_equal_the_unsliced_sums_bit_for_bit() {
         (direct - energy).abs() <= 1e-9 * direct,
         "{direct} vs {energy}"
     );
+    // A pass that keeps its rows (residual and gradient of every point), and a pass at the
+    // same state that reads them instead of projecting, give the same sums bit for bit, prior
+    // included.
+    let prior = RangePrior {
+        bones: vec![(2, 3.0)],
+        margin: 0.1,
+        ratios: vec![(2, 1, 0.2, 2.0)],
+    };
+    assert!(prior.energy(&w) > 0.0, "the prior must take part");
+    let terms = EnergyTerms {
+        prior: Some(&prior),
+        ..terms
+    };
+    let whole = normal_equations(&w, &classes, &params, &terms, 140.0);
+    let energy = {
+        let mut e = EnergyAccumulator::new(w.bones());
+        while !e.feed(&terms, usize::MAX) {}
+        e.finish(&terms, &w)
+    };
+    for budget in [CHUNK, 5_000, usize::MAX] {
+        let mut kept = vec![NO_ROW; terms.count()];
+        let mut e = EnergyAccumulator::new(w.bones());
+        let mut rows = Rows {
+            read: None,
+            write: Some(&mut kept),
+        };
+        while !e.feed_rows(&terms, budget, &mut rows) {}
+        assert_eq!(e.finish(&terms, &w).to_bits(), energy.to_bits());
+        let mut rows = Rows {
+            read: Some(&kept),
+            write: None,
+        };
+        let mut acc = NormalAccumulator::new(&w, &classes, &params, &terms, 140.0);
+        while !acc.feed_rows(&terms, budget, &mut rows) {}
+        let ne = acc.finish(&w, &terms);
+        assert_eq!(ne.0.map(f64::to_bits), whole.0.map(f64::to_bits));
+        assert_eq!(ne.1.map(f64::to_bits), whole.1.map(f64::to_bits));
+        assert_eq!(ne.2.to_bits(), whole.2.to_bits(), "budget {budget}");
+        let mut e = EnergyAccumulator::new(w.bones());
+        while !e.feed_rows(&terms, budget, &mut rows) {}
+        assert_eq!(e.finish(&terms, &w).to_bits(), energy.to_bits());
+    }
+    // Rows read at another state are another state's: the sums differ.
+    let mut moved = w.clone();
+    apply(&mut moved, &classes, &params[0], 0.05);
+    let mut kept = vec![NO_ROW; terms.count()];
+    let mut e = EnergyAccumulator::new(moved.bones());
+    let mut rows = Rows {
+        read: None,
+        write: Some(&mut kept),
+    };
+    while !e.feed_rows(&terms, usize::MAX, &mut rows) {}
+    let mut acc = NormalAccumulator::new(&w, &classes, &params, &terms, 140.0);
+    let mut rows = Rows {
+        read: Some(&kept),
+        write: None,
+    };
+    while !acc.feed_rows(&terms, usize::MAX, &mut rows) {}
+    assert_ne!(acc.finish(&w, &terms).2.to_bits(), whole.2.to_bits());
 }
 
 /// An assignment built in slices (`with_capacity` + `push`, as level 1 builds its 100k-point
@@ -578,6 +638,42 @@ fn budgets_give_the_same_bytes(s: &SynthStatue) {
     let mut reg = Registration::new(cloud, t, opts).unwrap();
     reg.step(Duration::from_micros(200));
     drop(reg);
+}
+
+/// Reading the last pass's residuals and gradients at an unchanged state (`reuse_rows`)
+/// instead of projecting again changes no sum: the same labels, mean distance and skeleton
+/// bit for bit, on a complete statue and a broken one (the work units are the same: a pass
+/// reading rows is sliced like one projecting).
+#[test]
+fn reusing_the_last_pass_rows_gives_the_same_bytes() {
+    use pygmalion::fakir::{Registration, RegistrationOptions};
+    use std::sync::Arc;
+    for s in [
+        small_human(11, 3_000, true),
+        cut_human(12, 3_000, &[("l_forearm", 0.0)]),
+    ] {
+        let fit = |reuse_rows: bool| {
+            let mut opts = RegistrationOptions {
+                subsample: 1_500,
+                init_subsample: 600,
+                ..Default::default()
+            };
+            opts.solver.reuse_rows = reuse_rows;
+            Registration::new(Arc::new(s.cloud.clone()), s.truth.template.clone(), opts)
+                .unwrap()
+                .run_to_convergence()
+                .unwrap()
+        };
+        let (with, without) = (fit(true), fit(false));
+        assert_eq!(with.labels, without.labels);
+        assert_eq!(
+            with.mean_distance.to_bits(),
+            without.mean_distance.to_bits()
+        );
+        assert_eq!(with.skeleton.pose().bones, without.skeleton.pose().bones);
+        assert_eq!(with.missing, without.missing);
+        assert_eq!(with.units, without.units);
+    }
 }
 
 #[test]

@@ -8,8 +8,9 @@
 
 use super::assign::Assignment;
 use super::lm::{
-    EnergyAccumulator, EnergyTerms, Limits, LmStep, NormalAccumulator, OCCUPANCY_SAMPLES,
-    OccupancyTerm, PRIOR_MARGIN, Param, RangePrior, SLICE_POINTS, lm_decide, lm_trial,
+    EnergyAccumulator, EnergyTerms, Limits, LmStep, NO_ROW, NormalAccumulator, OCCUPANCY_SAMPLES,
+    OccupancyTerm, PRIOR_MARGIN, Param, PointRows, RangePrior, Rows, SLICE_POINTS, lm_decide,
+    lm_trial,
 };
 use super::world::{End, RadiusClasses, WorldSkeleton};
 use crate::anatomy::template::BoneKind;
@@ -106,6 +107,10 @@ pub struct SolverSettings {
     pub range_prior: bool,
     /// Seed each limb chain's directions before its initial pass ([`Solver::seed_chain`]).
     pub seed_chains: bool,
+    /// A pass over an energy's points at the state of the last pass reads that pass's
+    /// residuals and gradients instead of projecting again (`RowCache`). The same sums bit for
+    /// bit either way (a test registers with and without).
+    pub reuse_rows: bool,
 }
 
 impl Default for SolverSettings {
@@ -119,6 +124,7 @@ impl Default for SolverSettings {
             occupancy: true,
             seed_chains: true,
             range_prior: true,
+            reuse_rows: true,
         }
     }
 }
@@ -157,7 +163,48 @@ pub struct Solver<'p> {
     /// Bones of a limb the statue has lost ([`Solver::set_absent`]): they take no points and
     /// the schedule does not fit them.
     pub absent: Vec<bool>,
+    /// The rows of the last pass over an energy's members, for the next pass at the same
+    /// state ([`RowCache`]).
+    rows: RowCache,
+    /// Room for the rows of a pass under way.
+    scratch: PointRows,
+    /// Changes whenever the members change (a refresh, the absent bones, a new assignment).
+    epoch: u64,
     pause: Option<&'p mut dyn Pause>,
+}
+
+/// The [`PointRows`] of the last pass over the members of an energy's bones, and the state
+/// they belong to: which bones, their geometry, and the members' epoch. A pass at the same
+/// state reads them instead of projecting (`reuse_rows`): the LM loop's next parameter group
+/// starts where the last one ended, and a round's first group where the round's energy was
+/// summed.
+#[derive(Default)]
+struct RowCache {
+    bones: Vec<usize>,
+    geometry: Vec<Bone>,
+    epoch: u64,
+    rows: PointRows,
+    valid: bool,
+}
+
+/// A pass under way ([`Solver::begin_pass`]): it reads `cached` (`fits`) or writes `room`
+/// (`write`), or neither (rows not reused).
+struct Pass {
+    fits: bool,
+    write: bool,
+    was_valid: bool,
+    cached: PointRows,
+    room: PointRows,
+}
+
+impl Pass {
+    /// Where the pass's next slice reads or writes its rows.
+    fn rows(&mut self) -> Rows<'_> {
+        Rows {
+            read: self.fits.then_some(&self.cached[..]),
+            write: self.write.then_some(&mut self.room[..]),
+        }
+    }
 }
 
 impl<'p> Solver<'p> {
@@ -202,6 +249,9 @@ impl<'p> Solver<'p> {
             tree,
             tree_points,
             spacing,
+            rows: RowCache::default(),
+            scratch: Vec::new(),
+            epoch: 0,
             pause: Some(pause),
         }
     }
@@ -219,6 +269,7 @@ impl<'p> Solver<'p> {
             self.unit()?;
         }
         self.assignment.members_into(&mut self.members);
+        self.epoch += 1;
         Ok(())
     }
 
@@ -337,6 +388,7 @@ impl<'p> Solver<'p> {
     /// bones stay absent.
     pub fn set_assignment(&mut self, a: Assignment) {
         self.assignment = a;
+        self.epoch += 1;
         self.enable_present();
         let n = self.world.template.bones.len();
         self.assigned_bones =
@@ -369,6 +421,7 @@ impl<'p> Solver<'p> {
         }
         self.assigned_bones = bones;
         self.assignment.members_into(&mut self.members);
+        self.epoch += 1;
         // The members' lists are a pass over every point: a unit of their own, so the unit
         // after the refresh starts with them built.
         self.unit()?;
@@ -515,9 +568,12 @@ impl<'p> Solver<'p> {
                             self.size,
                         )
                     };
-                    while !acc.feed(&terms!(), SLICE_POINTS) {
+                    let geometry = self.world.bones();
+                    let mut pass = self.begin_pass(energy_bones, &geometry);
+                    while !acc.feed_rows(&terms!(), SLICE_POINTS, &mut pass.rows()) {
                         self.unit()?;
                     }
+                    self.end_pass(pass, Some((energy_bones, geometry)));
                     let ne = acc.finish(&self.world, &terms!());
                     normal_eq = Some(ne);
                     self.unit()?;
@@ -539,20 +595,26 @@ impl<'p> Solver<'p> {
                 clamp_bones,
             );
             let step = match trial {
-                Some((trial, norm)) => {
-                    let mut acc = EnergyAccumulator::new(trial.bones());
-                    while !acc.feed(&terms!(), SLICE_POINTS) {
+                // The trial's pass keeps its rows: accepted, the next normal equations read
+                // them instead of projecting again.
+                Some(t) => {
+                    let geometry = t.state.bones();
+                    let mut acc = EnergyAccumulator::new(geometry.clone());
+                    let mut pass = self.begin_pass(energy_bones, &geometry);
+                    while !acc.feed_rows(&terms!(), SLICE_POINTS, &mut pass.rows()) {
                         self.unit()?;
                     }
-                    let after = acc.finish(&terms!(), &trial);
-                    lm_decide(
+                    let after = acc.finish(&terms!(), &t.state);
+                    let step = lm_decide(
                         &mut self.world,
-                        trial,
-                        norm,
+                        t.state,
+                        t.norm,
                         after,
                         &mut lambda,
                         &mut normal_eq,
-                    )
+                    );
+                    self.end_pass(pass, step.accepted.then_some((energy_bones, geometry)));
+                    step
                 }
                 // A singular system: a rejected step.
                 None => LmStep {
@@ -592,8 +654,14 @@ impl<'p> Solver<'p> {
             self.bootstrap(b)?;
         }
 
+        // Each round starts from the energy the last one ended with (same state, same
+        // assignment).
+        let mut start = None;
         for _ in 0..self.settings.one_bone_rounds {
-            let before = self.energy_of(&energy)?;
+            let before = match start {
+                Some(e) => e,
+                None => self.energy_of(&energy)?,
+            };
             match free {
                 End::Second => {
                     let (a1, a2) = self.swing_axes(b);
@@ -633,19 +701,22 @@ impl<'p> Solver<'p> {
                     &[b],
                 )?;
             }
-            if self.end_round(&energy, before)? {
-                break;
+            match self.end_round(&energy, before)? {
+                None => break,
+                after => start = after,
             }
         }
         Ok(())
     }
 
-    /// Ends a round of a fit: refreshes the assignment and tells whether the energy of `bones`
-    /// changed by less than 1e-4 (relative) since `before`.
-    fn end_round(&mut self, bones: &[usize], before: f64) -> Result<bool, Cancelled> {
+    /// Ends a round of a fit: refreshes the assignment; `None` when the energy of `bones`
+    /// changed by less than 1e-4 (relative) since `before`, else the energy the next round
+    /// starts from.
+    fn end_round(&mut self, bones: &[usize], before: f64) -> Result<Option<f64>, Cancelled> {
         self.refresh()?;
         let after = self.energy_of(bones)?;
-        Ok((before - after).abs() <= 1e-4 * before.max(1e-30))
+        let settled = (before - after).abs() <= 1e-4 * before.max(1e-30);
+        Ok((!settled).then_some(after))
     }
 
     /// Two-bone fit of the joint between `a` and its chain successor `b` (thesis §2.3.2): the
@@ -655,11 +726,15 @@ impl<'p> Solver<'p> {
         let mut energy = self.with_followers(a);
         energy.push(b);
         let clamp = [a, b];
+        let mut start = None;
         for _ in 0..self.settings.two_bone_rounds {
             if self.members_of(&energy) == 0 {
                 break;
             }
-            let before = self.energy_of(&energy)?;
+            let before = match start {
+                Some(e) => e,
+                None => self.energy_of(&energy)?,
+            };
             self.lm(&[Param::PairRotate { a, b }], &energy, &clamp)?;
             self.lm(&[Param::PairLength { a, b, first: true }], &energy, &clamp)?;
             self.lm(&[Param::PairLength { a, b, first: false }], &energy, &clamp)?;
@@ -671,8 +746,9 @@ impl<'p> Solver<'p> {
                 &energy,
                 &clamp,
             )?;
-            if self.end_round(&energy, before)? {
-                break;
+            match self.end_round(&energy, before)? {
+                None => break,
+                after => start = after,
             }
         }
         Ok(())
@@ -719,7 +795,9 @@ impl<'p> Solver<'p> {
     /// Current energy of `bones`' points (assignment fixed), summed in work units of at most
     /// [`SLICE_POINTS`] points.
     pub fn energy_of(&mut self, bones: &[usize]) -> Result<f64, Cancelled> {
-        let mut acc = EnergyAccumulator::new(self.world.bones());
+        let geometry = self.world.bones();
+        let mut acc = EnergyAccumulator::new(geometry.clone());
+        let mut pass = self.begin_pass(bones, &geometry);
         loop {
             let terms = EnergyTerms {
                 assignment: &self.assignment,
@@ -728,10 +806,64 @@ impl<'p> Solver<'p> {
                 occupancy: None,
                 prior: None,
             };
-            if acc.feed(&terms, SLICE_POINTS) {
+            if acc.feed_rows(&terms, SLICE_POINTS, &mut pass.rows()) {
+                self.end_pass(pass, Some((bones, geometry)));
                 return Ok(acc.data);
             }
             self.unit()?;
+        }
+    }
+
+    /// Starts a pass over the members of `bones` at the state whose bones are `geometry`:
+    /// it reads the cached rows when they are this state's, else it writes its own (when
+    /// rows are reused). The cache is out of the solver until [`Solver::end_pass`].
+    fn begin_pass(&mut self, bones: &[usize], geometry: &[Bone]) -> Pass {
+        let reuse = self.settings.reuse_rows;
+        let c = &self.rows;
+        let fits = reuse
+            && c.valid
+            && c.epoch == self.epoch
+            && c.bones == bones
+            && bones
+                .iter()
+                .all(|&b| c.geometry.get(b) == Some(&geometry[b]));
+        let was_valid = std::mem::replace(&mut self.rows.valid, false);
+        let cached = std::mem::take(&mut self.rows.rows);
+        let mut room = std::mem::take(&mut self.scratch);
+        let write = reuse && !fits;
+        if write {
+            let count = bones.iter().map(|&b| self.members[b].len()).sum();
+            room.clear();
+            room.resize(count, NO_ROW);
+        }
+        Pass {
+            fits,
+            write,
+            was_valid,
+            cached,
+            room,
+        }
+    }
+
+    /// Ends a pass: with `adopt` (the bones and geometry of the pass's state, when that state
+    /// is now the solver's), the rows it wrote become the cache; otherwise the cache stays.
+    fn end_pass(&mut self, pass: Pass, adopt: Option<(&[usize], Vec<Bone>)>) {
+        match adopt {
+            Some((bones, geometry)) if pass.write => {
+                self.rows = RowCache {
+                    bones: bones.to_vec(),
+                    geometry,
+                    epoch: self.epoch,
+                    rows: pass.room,
+                    valid: true,
+                };
+                self.scratch = pass.cached;
+            }
+            _ => {
+                self.rows.rows = pass.cached;
+                self.rows.valid = pass.was_valid;
+                self.scratch = pass.room;
+            }
         }
     }
 

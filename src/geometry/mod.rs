@@ -4,4 +4,4 @@ pub mod bone;
 pub mod frames;
 pub mod pca;
 
-pub use bone::{Bone, Part, PreparedBone, Projection};
+pub use bone::{Bone, BoneGradient, Part, PreparedBone, Projection};
