@@ -12,11 +12,10 @@
 //! A rejected step leaves the state unchanged, so its normal equations are kept and reused
 //! with the new damping (on the papers' chain two thirds of the LM iterations are rejected
 //! steps: `fakir/chain4_5k` 0.63 → 0.49 s, the same skeleton bit for bit). **Tried and
-//! dropped:** stopping before a trial whose linearised model promises a decrease
-//! (`−(2 δ·Jᵀr + δᵀJᵀJδ)`) under 10⁻⁶ or 10⁻⁸ of the energy. It cut the chain's work units
-//! from 10,546 to 3,100 and its time by half, but the steps it skips at high damping still
-//! gain, and over the 16 posed statues of `fakir/accuracy_posed` the statues under 2% of
-//! the height in joint error fell from 14 to 11 (10⁻⁶) and 12 (10⁻⁸).
+//! dropped twice** (README, *Stopping an LM loop on its model's promise*): stopping before a
+//! trial whose linearised model promises a decrease (`−(2 δ·Jᵀr + δᵀJᵀJδ)`) under 10⁻⁶ or
+//! 10⁻⁸ of the energy halves the chain's time, but the steps it skips at high damping still
+//! gain: fewer synthetic statues end under 2% of the height in joint error.
 //!
 //! **One projection per state (exact).** Each pass over an energy's points keeps every
 //! point's residual and gradient ([`PointRows`]); the next pass at the same state reads them
@@ -24,7 +23,7 @@
 //! members): the normal equations after an accepted step (its trial's pass projected), the
 //! next parameter group of the same fit, the first group after a round's energy was summed.
 //! The same sums bit for bit (tests), so the same skeletons.
-
+//!
 //! **Derivatives.** Each residual's derivative is the chain rule of two factors:
 //! * per point, analytic: the derivative of the residual with respect to its bone's
 //!   `c1, c2, r1, r2` ([`crate::geometry::Projection::gradient`], envelope theorem);
