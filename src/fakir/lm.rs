@@ -548,9 +548,9 @@ pub type PointRow = (f32, BoneGradient);
 /// and sums exactly the same numbers.
 pub type PointRows = Vec<PointRow>;
 
-/// What a sliced pass reads its points' rows from and writes them to: `read`, rows of an
-/// earlier pass at the same state (nothing is projected); `write`, room for this pass's
-/// rows (as many as the members).
+/// Where a sliced pass finds its points' rows: `read`, rows of an earlier pass at the same
+/// state (nothing is projected; `write` is then left alone); else `write`, room for the
+/// rows it projects (as many as the members); neither, rows projected and dropped.
 #[derive(Default)]
 pub struct Rows<'r> {
     pub read: Option<&'r [PointRow]>,
@@ -570,8 +570,7 @@ pub const NO_ROW: PointRow = (
 
 /// The rows of the points `run` (whose first member is row `at` of the pass) of bone `pb`,
 /// chunk by chunk in parallel: `f` folds each chunk's rows into a partial sum, in order; the
-/// rows are read from `rows.read` or projected (into `rows.write`, or a chunk on the stack),
-/// and copied to `rows.write`.
+/// rows are read from `rows.read` or projected (into `rows.write`, or a chunk on the stack).
 fn chunk_rows<T: Send>(
     a: &Assignment,
     pb: &PreparedBone,
@@ -592,12 +591,7 @@ fn chunk_rows<T: Send>(
         .as_deref_mut()
         .map(|w| &mut w[at..at + run.len()]);
     match (read, write) {
-        (Some(r), w) => {
-            if let Some(w) = w {
-                w.copy_from_slice(r);
-            }
-            r.par_chunks(CHUNK).map(&f).collect()
-        }
+        (Some(r), _) => r.par_chunks(CHUNK).map(&f).collect(),
         (None, Some(w)) => run
             .par_chunks(CHUNK)
             .zip(w.par_chunks_mut(CHUNK))
@@ -896,7 +890,7 @@ pub fn lm_trial(
     ne: &NormalEquations,
     lambda: &mut f64,
     clamp_bones: &[usize],
-) -> Option<Trial> {
+) -> Option<(WorldSkeleton, f64)> {
     let k = params.len();
     let (mut jtj, jtr, _) = *ne;
     for j in 0..k {
@@ -925,13 +919,7 @@ pub fn lm_trial(
     }
     limits.clamp(&mut trial, classes, clamp_bones);
     let norm = delta[..k].iter().map(|d| d * d).sum::<f64>().sqrt();
-    Some(Trial { state: trial, norm })
-}
-
-/// A damped LM step ([`lm_trial`]): the trial state and the step's norm.
-pub struct Trial {
-    pub state: WorldSkeleton,
-    pub norm: f64,
+    Some((trial, norm))
 }
 
 /// Ends an LM iteration: the trial state (from [`lm_trial`], total energy `after`) replaces

@@ -597,18 +597,18 @@ impl<'p> Solver<'p> {
             let step = match trial {
                 // The trial's pass keeps its rows: accepted, the next normal equations read
                 // them instead of projecting again.
-                Some(t) => {
-                    let geometry = t.state.bones();
+                Some((trial, norm)) => {
+                    let geometry = trial.bones();
                     let mut acc = EnergyAccumulator::new(geometry.clone());
                     let mut pass = self.begin_pass(energy_bones, &geometry);
                     while !acc.feed_rows(&terms!(), SLICE_POINTS, &mut pass.rows()) {
                         self.unit()?;
                     }
-                    let after = acc.finish(&terms!(), &t.state);
+                    let after = acc.finish(&terms!(), &trial);
                     let step = lm_decide(
                         &mut self.world,
-                        t.state,
-                        t.norm,
+                        trial,
+                        norm,
                         after,
                         &mut lambda,
                         &mut normal_eq,
