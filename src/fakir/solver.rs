@@ -268,9 +268,15 @@ impl<'p> Solver<'p> {
                 .relabel(start..(start + MAX_REFRESH_SLICE).min(n));
             self.unit()?;
         }
+        self.rebuild_members();
+        Ok(())
+    }
+
+    /// Rebuilds each bone's members from the labels; the rows cached for the old members
+    /// no longer fit (the epoch moves on).
+    fn rebuild_members(&mut self) {
         self.assignment.members_into(&mut self.members);
         self.epoch += 1;
-        Ok(())
     }
 
     /// [`Solver::set_absent`] for a solver whose distances are not computed yet (the first
@@ -420,8 +426,7 @@ impl<'p> Solver<'p> {
             self.unit()?;
         }
         self.assigned_bones = bones;
-        self.assignment.members_into(&mut self.members);
-        self.epoch += 1;
+        self.rebuild_members();
         // The members' lists are a pass over every point: a unit of their own, so the unit
         // after the refresh starts with them built.
         self.unit()?;
