@@ -8,6 +8,7 @@
 mod common;
 
 mod anatomy;
+mod anatomy_compare;
 mod anatomy_pose;
 mod cli;
 mod cloud_base;

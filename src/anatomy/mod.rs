@@ -1,6 +1,8 @@
 //! Anatomy: templates ([`template`]), skeleton state and forward kinematics ([`skeleton`]),
-//! poses and proportions as data ([`pose`]).
+//! poses and proportions as data ([`pose`]), comparison with a ground truth of another
+//! topology ([`compare`]).
 
+pub mod compare;
 pub mod pose;
 pub mod skeleton;
 pub mod template;

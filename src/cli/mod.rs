@@ -7,6 +7,7 @@
 //! | `info FILE` | points, bounding box, normals present, scale estimate |
 //! | `normals IN OUT [--k 16]` | (re-)estimates oriented normals, points kept in input order |
 //! | `synth OUT.ply [--template human] [--seed N] ...` | a synthetic statue with ground truth |
+//! | `compare FIT.json TRUTH.json` | distances between a fitted skeleton and a ground truth of any topology (see [`crate::anatomy::compare`]) |
 //! | `register IN.ply [--template human] [--anchor x,y,z] [--up y] [--out FIT.json] [--labels OUT.ply]` | FAKIR registration |
 //! | `repose IN.ply FIT.json POSE [--method baseline] [--proportions FILE] --out OUT.ply` | re-poses a registered statue by point-set skinning (see [`crate::anatomy::pose`], [`crate::skinning`]) |
 //! | `picture IN.ply --out OUT.png [--fit FIT.json] [--bones] [--pose POSE] [--method M\|all]` | a CPU-rendered picture; with a pose, one panel per method |
@@ -126,6 +127,10 @@ enum Command {
         #[arg(long)]
         labels: bool,
     },
+    /// Compares a fitted skeleton (FIT.json) with a ground-truth skeleton of any topology (a
+    /// rig's joint file, a synthetic statue's truth): mean distances between the two as
+    /// curves, and from each truth joint to the nearest fitted joint.
+    Compare { fit: PathBuf, truth: PathBuf },
     /// Fits an anatomy template to a statue with FAKIR.
     Register {
         input: PathBuf,
@@ -400,6 +405,7 @@ where
             missing: missing.as_deref(),
             front: front.as_deref(),
         }),
+        Command::Compare { fit, truth } => compare(&fit, &truth),
         Command::Repose {
             input,
             fit,
@@ -512,6 +518,31 @@ pub(crate) fn read_with_normals(
     let estimated = crate::cloud::normals::ensure_normals(&mut cloud, &NormalOptions::default())
         .map_err(|e| Error::input(format!("{}: {e}", path.display())))?;
     Ok((cloud, estimated))
+}
+
+/// `pygmalion compare FIT.json TRUTH.json` (see [`crate::anatomy::compare`]).
+fn compare(fit: &Path, truth: &Path) -> Result<()> {
+    use crate::anatomy::compare::{JointGraph, skeleton_distance};
+    let (f, t) = (JointGraph::load(fit)?, JointGraph::load(truth)?);
+    let d = skeleton_distance(&f, &t).ok_or_else(|| {
+        Error::config(
+            truth,
+            "the ground truth has no extent (all its joints coincide)",
+        )
+    })?;
+    println!(
+        "{} against {}: truth → fit {:.2}%, fit → truth {:.2}%, truth joints → nearest fitted \
+         joint {:.2}% (worst {} {:.2}%) of the truth's extent {:.4}",
+        fit.display(),
+        truth.display(),
+        d.percent(d.truth_to_fit),
+        d.percent(d.fit_to_truth),
+        d.percent(d.joints),
+        d.worst_joint.0,
+        d.percent(d.worst_joint.1),
+        d.extent
+    );
+    Ok(())
 }
 
 fn info(path: &Path, drop_non_finite: bool) -> Result<()> {
