@@ -1559,7 +1559,7 @@ fn check_lost_case(
     for (b, m) in fit.missing.iter().enumerate() {
         if *m {
             assert_eq!(fit.bone_counts[b], 0, "a lost bone took points");
-            let mirror = pygmalion::fakir::support::mirrors(t)[b].unwrap();
+            let mirror = t.mirror_bones()[b].unwrap();
             let (a, c) = (&fit.skeleton.bones[b], &fit.skeleton.bones[mirror]);
             assert!(
                 (a.length - c.length).abs() < 1e-4 * c.length.max(1e-6),
@@ -1766,11 +1766,10 @@ fn lost_limbs_are_named_with_what_they_carry_and_collapse_into_their_joint() {
 #[test]
 fn a_skeleton_turned_around_exchanges_its_sides_and_pays_for_its_joints() {
     use pygmalion::fakir::init::implausibility;
-    use pygmalion::fakir::support::mirrors;
     for seed in [3u64, 8, 16, 21, 22, 23, 24, 25] {
         let s = posed_human(seed, 2_000);
         let truth = &s.truth;
-        let mirror = mirrors(&truth.template);
+        let mirror = truth.template.mirror_bones();
         // The pelvis block's two sides are each other's mirror, the bone up the middle none.
         let side = |n: &str| mirror[truth.template.bone_index(n).unwrap()];
         assert_eq!(
@@ -1923,11 +1922,10 @@ fn a_limb_reset_puts_one_limb_back_at_rest_and_keeps_the_rest_of_the_fit() {
 
 #[test]
 fn crossed_limbs_are_found_and_exchanging_below_them_uncrosses_them() {
-    use pygmalion::fakir::support::mirrors;
     for seed in [3u64, 8, 16, 21] {
         let s = posed_human(seed, 2_000);
         let t = s.truth.template.clone();
-        let mirror = mirrors(&t);
+        let mirror = t.mirror_bones();
         let none = vec![false; t.bones.len()];
         let w = WorldSkeleton::from_skeleton(&s.truth);
         // The generator draws no crossed limbs (measured: on 72 statues the lowest ratio of
@@ -1989,11 +1987,10 @@ fn crossed_limbs_are_found_and_exchanging_below_them_uncrosses_them() {
 #[test]
 fn a_starved_limb_whose_mirror_reached_over_to_its_place_is_found() {
     use pygmalion::fakir::registration::{CROSSED_OVER_NEAR, STARVED};
-    use pygmalion::fakir::support::mirrors;
     for seed in [3u64, 8, 16, 21] {
         let s = posed_human(seed, 2_000);
         let t = s.truth.template.clone();
-        let mirror = mirrors(&t);
+        let mirror = t.mirror_bones();
         let none = vec![false; t.bones.len()];
         let bone = |n: &str| t.bone_index(n).unwrap();
         let (lt, ls) = (bone("l_thigh"), bone("l_shin"));
@@ -2068,7 +2065,6 @@ fn a_fit_with_crossed_legs_is_registered_again_uncrossed() {
 }
 
 fn crossed_registration() {
-    use pygmalion::fakir::support::mirrors;
     // `synth --seed 64 --rigid --height 1.7` (30k points), registered as `register` does.
     // Without the crossed-limbs check each thigh ran from its hip to the other knee: joint
     // error 8.8% of the height. Registered again with the legs exchanged below the thighs,
@@ -2079,7 +2075,7 @@ fn crossed_registration() {
     assert!(err < 0.025, "seed 64: joint error {err}");
     let t = &fit.skeleton.template;
     let w = WorldSkeleton::from_skeleton(&fit.skeleton);
-    let crossed = w.most_crossed(&mirrors(t), &vec![false; t.bones.len()]);
+    let crossed = w.most_crossed(&t.mirror_bones(), &vec![false; t.bones.len()]);
     assert_eq!(
         crossed,
         None,

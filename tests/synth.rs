@@ -101,6 +101,58 @@ fn proportions_stay_within_the_jitter() {
 }
 
 #[test]
+fn symmetric_proportions_give_left_and_right_the_same_bones_and_nothing_else_changes() {
+    for name in pygmalion::anatomy::template::BUILTIN_TEMPLATES {
+        let t = Arc::new(Template::builtin(name).unwrap());
+        let mirror = t.mirror_bones();
+        let o = SynthOptions {
+            points: 100,
+            seed: 7,
+            proportion_jitter: 0.5,
+            random_pose: false,
+            ..Default::default()
+        };
+        let sym = generate(
+            t.clone(),
+            &SynthOptions {
+                symmetric: true,
+                ..o.clone()
+            },
+        )
+        .unwrap();
+        let lop = generate(
+            t.clone(),
+            &SynthOptions {
+                symmetric: false,
+                ..o
+            },
+        )
+        .unwrap();
+        let (mut pairs, mut lopsided) = (0, 0);
+        for (i, m) in mirror.iter().enumerate() {
+            let Some(m) = *m else { continue };
+            pairs += 1;
+            let (a, b) = (&sym.truth.bones[i], &sym.truth.bones[m]);
+            for (x, y) in [(a.length, b.length), (a.r1, b.r1), (a.r2, b.r2)] {
+                assert!(
+                    (x - y).abs() <= 1e-5 * x.abs().max(1.0),
+                    "{name} {}: {x} / {y}",
+                    t.bones[i].name
+                );
+            }
+            let (a, b) = (&lop.truth.bones[i], &lop.truth.bones[m]);
+            lopsided += usize::from((a.length - b.length).abs() > 1e-3 * a.length);
+            // The first bone of each pair keeps its own factors: the same draws either way.
+            if m > i {
+                assert_eq!(sym.truth.bones[i].length, lop.truth.bones[i].length);
+            }
+        }
+        assert!(pairs >= 4, "{name}: {pairs} mirrored bones");
+        assert!(lopsided > 0, "{name}: the default figure is lopsided");
+    }
+}
+
+#[test]
 fn gaussian_noise_has_the_requested_level() {
     let sigma = 0.01;
     let s = generate(

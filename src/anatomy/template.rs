@@ -531,6 +531,32 @@ impl Template {
         self.chains.iter().position(|c| c.name == name)
     }
 
+    /// The mirror bone of every bone: the bone at the same position in the mirror chain, and for
+    /// a bone of the root block the block bone from the same joint whose rest vector is reflected
+    /// across the template's `x = 0` plane (the pelvis' two sides); `None` for unpaired bones.
+    pub fn mirror_bones(&self) -> Vec<Option<usize>> {
+        let t = self;
+        let mut m = vec![None; t.bones.len()];
+        for c in &t.chains {
+            if let Some(mc) = c.mirror {
+                for (a, b) in c.bones.iter().zip(&t.chains[mc].bones) {
+                    m[*a] = Some(*b);
+                }
+            }
+        }
+        let rest_vec = |b: usize| t.joints[t.bones[b].to].rest - t.joints[t.bones[b].from].rest;
+        for i in t.block_bones() {
+            let v = rest_vec(i);
+            let reflected = Vec3::new(-v.x, v.y, v.z);
+            m[i] = t.block_bones().find(|&j| {
+                j != i
+                    && t.bones[j].from == t.bones[i].from
+                    && (rest_vec(j) - reflected).length() <= 1e-4 * v.length().max(1e-6)
+            });
+        }
+        m
+    }
+
     /// Bones of the root block.
     pub fn block_bones(&self) -> impl Iterator<Item = usize> + '_ {
         self.bones

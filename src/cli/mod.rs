@@ -102,6 +102,9 @@ enum Command {
         /// Proportion jitter per bone (0.3 = ±30%).
         #[arg(long, default_value_t = 0.3)]
         jitter: f32,
+        /// Left and right limbs get the same proportions (a stylised figure, not a lopsided one).
+        #[arg(long)]
+        symmetric: bool,
         /// Height of the statue.
         #[arg(long, default_value_t = 1.0)]
         height: f32,
@@ -353,6 +356,7 @@ where
             points,
             rest,
             jitter,
+            symmetric,
             height,
             noise,
             poisson,
@@ -371,6 +375,7 @@ where
                 seed,
                 random_pose: !rest,
                 proportion_jitter: jitter,
+                symmetric,
                 height,
                 noise_sigma: noise,
                 poisson_lambda: poisson,

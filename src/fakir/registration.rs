@@ -283,7 +283,7 @@ use super::schedule::{ScheduleSettings, register_skeleton};
 use super::solver::{Activity, Cancelled, NoPause, Pause, Solver, SolverSettings, template_extent};
 use super::support::{
     BoneSupport, SPACING_CHUNK, SupportExam, add_spacings, better, collapse, complete_with,
-    lost_from_names, mirrors, spacing_samples,
+    lost_from_names, spacing_samples,
 };
 use super::world::WorldSkeleton;
 use crate::anatomy::template::BoneKind;
@@ -886,7 +886,7 @@ fn register_here(
     }
     // The crossed-limbs check (see the module docs): the limbs below the most crossed pair
     // exchanged; the uncrossed fit wins with the lower score.
-    let mirror = mirrors(&template);
+    let mirror = template.mirror_bones();
     if uncross
         && let Some(b) = s.world.most_crossed(&mirror, &given_lost)
         && let Some(w) = s.world.exchanged_below(b, &mirror)
@@ -1133,7 +1133,7 @@ impl FullRun<'_> {
     /// The start of a facing check (levels 3 and 5 in the module docs): `world` turned around
     /// ([`WorldSkeleton::turned_around`]) at `scale`, its known-lost bones collapsed.
     fn turned(&self, world: &WorldSkeleton, scale: f32) -> Candidate {
-        self.start_at(&world.turned_around(&mirrors(&world.template)), scale)
+        self.start_at(&world.turned_around(&world.template.mirror_bones()), scale)
     }
 
     /// A start from `world` at `scale`, its known-lost bones collapsed (every start of a
@@ -1426,7 +1426,7 @@ fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result
     let trunk = super::solver::trunk_bones(&t);
     let nb = t.bones.len();
     let mut lost = known.to_vec();
-    let mirror = mirrors(&t);
+    let mirror = t.mirror_bones();
     // Parents come before their children in a template's bone order.
     for b in (0..nb).rev() {
         let limb = t.bones[b].kind != BoneKind::Block && !trunk[b];

@@ -123,31 +123,6 @@ pub fn add_spacings(
     }
 }
 
-/// The mirror bone of every bone: the bone at the same position in the mirror chain, and for
-/// a bone of the root block the block bone from the same joint whose rest vector is reflected
-/// across the template's `x = 0` plane (the pelvis' two sides); `None` for unpaired bones.
-pub fn mirrors(t: &Template) -> Vec<Option<usize>> {
-    let mut m = vec![None; t.bones.len()];
-    for c in &t.chains {
-        if let Some(mc) = c.mirror {
-            for (a, b) in c.bones.iter().zip(&t.chains[mc].bones) {
-                m[*a] = Some(*b);
-            }
-        }
-    }
-    let rest_vec = |b: usize| t.joints[t.bones[b].to].rest - t.joints[t.bones[b].from].rest;
-    for i in t.block_bones() {
-        let v = rest_vec(i);
-        let reflected = Vec3::new(-v.x, v.y, v.z);
-        m[i] = t.block_bones().find(|&j| {
-            j != i
-                && t.bones[j].from == t.bones[i].from
-                && (rest_vec(j) - reflected).length() <= 1e-4 * v.length().max(1e-6)
-        });
-    }
-    m
-}
-
 /// Expected length and radii of every bone (see the module docs), and whether the fitted
 /// bone had collapsed.
 fn expected_sizes(
@@ -182,7 +157,7 @@ fn expected_sizes(
         .zip(&templ)
         .map(|(f, e)| f.length < SHRUNK * e.0)
         .collect();
-    let mir = mirrors(t);
+    let mir = t.mirror_bones();
     let sizes = (0..t.bones.len())
         .map(|k| match mir[k] {
             Some(m) if healthy.map_or(!shrunk[m], |h| h[m]) => {
@@ -214,7 +189,7 @@ pub fn complete(fitted: &Skeleton, redo: &[bool]) -> Skeleton {
 pub fn complete_with(fitted: &Skeleton, redo: &[bool], healthy: Option<&[bool]>) -> Skeleton {
     let t = &fitted.template;
     let (sizes, shrunk) = expected_sizes(fitted, healthy);
-    let mir = mirrors(t);
+    let mir = t.mirror_bones();
     let rest = Skeleton::rest(t.clone());
     let fitted_pose = fitted.pose();
     let mut s = fitted.clone();

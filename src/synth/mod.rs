@@ -19,7 +19,9 @@
 //!   the rotations are carried by the parents' motions.
 //! * **Random proportions.** Each free bone's length is multiplied by a factor uniform in
 //!   `1 ± proportion_jitter`; each joint radius (shared along chains) likewise; the root block
-//!   gets one common factor; followers keep their length ratio. Radii are clamped so that no
+//!   gets one common factor; followers keep their length ratio. With `symmetric`, a left or
+//!   right bone takes its mirror's factors (coherent, stylised proportions rather than a
+//!   lopsided figure). Radii are clamped so that no
 //!   sphere contains its neighbour.
 //! * **Noise** is applied along the normal: Gaussian with standard deviation `noise_sigma`,
 //!   and "Poisson noise" of parameter λ as a zero-mean displacement `K − λ` with
@@ -112,6 +114,9 @@ pub struct SynthOptions {
     pub random_pose: bool,
     /// Per-bone length and per-joint radius factor uniform in `1 ± proportion_jitter`.
     pub proportion_jitter: f32,
+    /// Left and right get the same factors (a figure with coherent, stylised proportions):
+    /// each bone takes its mirror's factors (see [`Template::mirror_bones`]).
+    pub symmetric: bool,
     /// Height of the statue (the template's height is scaled to it).
     pub height: f32,
     /// Gaussian noise along the normal (standard deviation, output units).
@@ -137,6 +142,7 @@ impl Default for SynthOptions {
             seed: 0,
             random_pose: true,
             proportion_jitter: 0.3,
+            symmetric: false,
             height: 1.0,
             noise_sigma: 0.0,
             poisson_lambda: 0.0,
@@ -185,7 +191,7 @@ pub fn generate(template: Arc<Template>, opts: &SynthOptions) -> Result<SynthSta
     }
     let mut rng = Rng::new(opts.seed);
     let mut skel = Skeleton::rest(template.clone());
-    jitter_proportions(&mut skel, opts.proportion_jitter, &mut rng);
+    jitter_proportions(&mut skel, opts.proportion_jitter, opts.symmetric, &mut rng);
     if opts.random_pose {
         random_pose(&mut skel, &mut rng);
     }
@@ -442,22 +448,41 @@ pub fn sample_envelope(
     (positions, normals, labels)
 }
 
-fn jitter_proportions(skel: &mut Skeleton, j: f32, rng: &mut Rng) {
+fn jitter_proportions(skel: &mut Skeleton, j: f32, symmetric: bool, rng: &mut Rng) {
     if j <= 0.0 {
         return;
     }
     let t = skel.template.clone();
     let block = 1.0 + rng.range(-j, j) * 0.5;
     skel.block_scale *= block;
-    for (i, def) in t.bones.iter().enumerate() {
-        if def.kind == BoneKind::Free {
-            skel.bones[i].length *= 1.0 + rng.range(-j, j);
-        }
-    }
+    // Every factor is drawn (the same draws with or without `symmetric`); a symmetric figure
+    // then gives each bone of a right/left pair the factors of the pair's first bone.
+    let mut length_factor: Vec<f32> = t
+        .bones
+        .iter()
+        .map(|def| match def.kind {
+            BoneKind::Free => 1.0 + rng.range(-j, j),
+            _ => 1.0,
+        })
+        .collect();
     // Joint radii: one factor per joint, shared by the bones meeting there.
-    let joint_factor: Vec<f32> = (0..t.joints.len())
+    let mut joint_factor: Vec<f32> = (0..t.joints.len())
         .map(|_| 1.0 + rng.range(-j, j))
         .collect();
+    if symmetric {
+        for (i, m) in t.mirror_bones().into_iter().enumerate() {
+            if let Some(m) = m.filter(|&m| m < i) {
+                length_factor[i] = length_factor[m];
+                joint_factor[t.bones[i].to] = joint_factor[t.bones[m].to];
+                joint_factor[t.bones[i].from] = joint_factor[t.bones[m].from];
+            }
+        }
+    }
+    for (i, def) in t.bones.iter().enumerate() {
+        if def.kind == BoneKind::Free {
+            skel.bones[i].length *= length_factor[i];
+        }
+    }
     for (i, def) in t.bones.iter().enumerate() {
         let s = if def.kind == BoneKind::Block {
             block
