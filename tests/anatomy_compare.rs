@@ -161,6 +161,44 @@ fn a_bad_skeleton_file_is_refused_with_its_name_and_problem() {
     assert!(matches!(JointGraph::load(missing), Err(Error::Io { .. })));
 }
 
+#[test]
+fn the_compare_command_reads_both_files_and_names_a_bad_one() {
+    let dir = crate::common::scratch("anatomy_compare_cli");
+    let truth = dir.join("truth.json");
+    let t = Arc::new(Template::builtin("human").unwrap());
+    Skeleton::rest(t).save_json(&truth).unwrap();
+    let rig = dir.join("rig.json");
+    std::fs::write(
+        &rig,
+        r#"{"joints": {"a": [0, 0, 0], "b": [0, 1, 0]}, "bones": [["a", "b"]]}"#,
+    )
+    .unwrap();
+    let run = |fit: &std::path::Path, truth: &std::path::Path| {
+        pygmalion::cli::run([
+            "pygmalion",
+            "compare",
+            fit.to_str().unwrap(),
+            truth.to_str().unwrap(),
+        ])
+    };
+    run(&truth, &truth).unwrap();
+    run(&truth, &rig).unwrap();
+    let bad = dir.join("bad.json");
+    std::fs::write(&bad, r#"{"joints": {}, "bones": []}"#).unwrap();
+    for (f, t) in [(&bad, &truth), (&truth, &bad)] {
+        let e = run(f, t).unwrap_err().to_string();
+        assert!(e.contains("bad.json") && e.contains("no bones"), "{e}");
+    }
+    let point = dir.join("point.json");
+    std::fs::write(
+        &point,
+        r#"{"joints": {"a": [1, 1, 1]}, "bones": [["a", "a"]]}"#,
+    )
+    .unwrap();
+    let e = run(&truth, &point).unwrap_err().to_string();
+    assert!(e.contains("point.json") && e.contains("no extent"), "{e}");
+}
+
 /// The rigged wolf of the shared data (`skel_wolf_cragl`, 40k points, ground-truth skeleton of
 /// 21 bones, other joints than the quadruped template's): registered with automatic placement,
 /// its fit lies within 2.5% of the wolf's skeleton extent of the truth, both ways (measured

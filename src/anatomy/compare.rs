@@ -22,6 +22,7 @@
 //! were not fitted to anything. Both skeletons must be in the same coordinates (FIT.json's
 //! joints are in the input cloud's, like the shared data's joint files).
 
+use crate::cloud::Aabb;
 use crate::error::{Error, Result};
 use crate::math::Vec3;
 use std::path::Path;
@@ -134,22 +135,11 @@ impl JointGraph {
         Ok(g)
     }
 
-    /// Largest side of the bounding box of the joints and segment ends.
+    /// Largest side of the bounding box of the joints and segment ends (0 when there are none).
     pub fn extent(&self) -> f32 {
-        let mut lo = Vec3::splat(f32::INFINITY);
-        let mut hi = Vec3::splat(f32::NEG_INFINITY);
-        for p in self
-            .joints
-            .iter()
-            .chain(self.segments.iter().flat_map(|(a, b)| [a, b]))
-        {
-            lo = lo.min(*p);
-            hi = hi.max(*p);
-        }
-        if lo.x > hi.x {
-            return 0.0;
-        }
-        (hi - lo).max_element()
+        let ends = self.segments.iter().flat_map(|&(a, b)| [a, b]);
+        let points: Vec<Vec3> = self.joints.iter().copied().chain(ends).collect();
+        Aabb::of(&points).map_or(0.0, |b| b.size().max_element())
     }
 
     /// Points along every segment, at most `step` apart, both ends included.

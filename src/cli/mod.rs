@@ -132,7 +132,7 @@ enum Command {
     },
     /// Compares a fitted skeleton (FIT.json) with a ground-truth skeleton of any topology (a
     /// rig's joint file, a synthetic statue's truth): mean distances between the two as
-    /// curves, and from each truth joint to the nearest fitted joint.
+    /// curves, and from each truth joint to the nearest end of a fitted bone.
     Compare { fit: PathBuf, truth: PathBuf },
     /// Fits an anatomy template to a statue with FAKIR.
     Register {
@@ -537,7 +537,7 @@ fn compare(fit: &Path, truth: &Path) -> Result<()> {
     })?;
     println!(
         "{} against {}: truth → fit {:.2}%, fit → truth {:.2}%, truth joints → nearest fitted \
-         joint {:.2}% (worst {} {:.2}%) of the truth's extent {:.4}",
+         bone end {:.2}% (worst {} {:.2}%) of the truth's extent {:.4}",
         fit.display(),
         truth.display(),
         d.percent(d.truth_to_fit),

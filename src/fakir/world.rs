@@ -240,9 +240,9 @@ impl WorldSkeleton {
     /// and right exchanged (the hypothesis of the registration's facing check). The root
     /// block turns half a turn about the figure's up axis through the root joint, so its left
     /// and right sides change places; every bone of a mirrored pair (`mirror`, see
-    /// [`crate::fakir::support::mirrors`]) takes its mirror's direction, length and radii, so
-    /// the limbs stay where they lay with their labels exchanged; an unpaired bone keeps its
-    /// own. Frames as in [`WorldSkeleton::untwisted`]. The block's own bones turn with it
+    /// [`crate::anatomy::Template::mirror_bones`]) takes its mirror's direction, length and
+    /// radii, so the limbs stay where they lay with their labels exchanged; an unpaired bone
+    /// keeps its own. Frames as in [`WorldSkeleton::untwisted`]. The block's own bones turn with it
     /// and take their mirror's radii, as the limbs hanging from them do.
     pub fn turned_around(&self, mirror: &[Option<usize>]) -> WorldSkeleton {
         let up = self.root_rotation * Vec3::Y;
@@ -263,14 +263,15 @@ impl WorldSkeleton {
     }
 
     /// The most **crossed** pair of mirrored limb bones (`mirror`, see
-    /// [`crate::fakir::support::mirrors`]), by the lower index of the two, or `None`. Two bones
-    /// `a`, `b` starting at different joints are crossed when exchanging their ends makes them
-    /// shorter: `|a.c1 − b.c2| + |b.c1 − a.c2| < |a| + |b|` (segments that intersect always
-    /// are, by the triangle inequality); the most crossed has the lowest ratio of the two
-    /// sums. Only free bones are examined, and pairs whose subtrees hold a bone of `skip` (known
-    /// lost, collapsed) are left out. A fit with crossed bones has laid each limb's lower part
-    /// on the other limb (a thigh from its hip to the other knee): limbs do not pass through
-    /// one another, and no synthetic statue's true skeleton has such a pair.
+    /// [`crate::anatomy::Template::mirror_bones`]), by the lower index of the two, or `None`.
+    /// Two bones `a`, `b` starting at different joints are crossed when exchanging their ends
+    /// makes them shorter: `|a.c1 − b.c2| + |b.c1 − a.c2| < |a| + |b|` (segments that
+    /// intersect always are, by the triangle inequality); the most crossed has the lowest
+    /// ratio of the two sums. Only free bones are examined, and pairs whose subtrees hold a
+    /// bone of `skip` (known lost, collapsed) are left out. A fit with crossed bones has laid
+    /// each limb's lower part on the other limb (a thigh from its hip to the other knee):
+    /// limbs do not pass through one another, and no synthetic statue's true skeleton has
+    /// such a pair.
     pub fn most_crossed(&self, mirror: &[Option<usize>], skip: &[bool]) -> Option<usize> {
         let t = &self.template;
         let posed = self.pose();
