@@ -16,7 +16,7 @@
 //!   (ends and bends: a curve can lie on the truth's while its knee sits elsewhere along it).
 //!
 //! **Choices.** Each curve is sampled every 1/200 of the truth's extent (the largest side of
-//! the bounding box of its joints), both ends of every segment included, and a mean is over
+//! the bounding box of its joints and bone ends), both ends of every segment included, and a mean is over
 //! those samples (so a long bone weighs more than a short one). The figures are also given
 //! as a share of that extent. A fit's lost bones (FIT.json's `missing`) are left out: they
 //! were not fitted to anything. Both skeletons must be in the same coordinates (FIT.json's
@@ -42,15 +42,15 @@ pub struct JointGraph {
 /// share of the truth's extent.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SkeletonDistance {
-    /// Largest side of the bounding box of the truth's joints.
+    /// Largest side of the bounding box of the truth's joints and bone ends.
     pub extent: f32,
     /// Mean distance from the truth's curve to the fit's.
     pub truth_to_fit: f32,
     /// Mean distance from the fit's curve to the truth's.
     pub fit_to_truth: f32,
-    /// Mean distance from each truth joint to the nearest fitted joint.
+    /// Mean distance from each truth joint to the nearest end of a fitted bone.
     pub joints: f32,
-    /// The truth joint farthest from every fitted joint, and that distance.
+    /// The truth joint farthest from every fitted bone end, and that distance.
     pub worst_joint: (String, f32),
 }
 
@@ -99,22 +99,20 @@ impl JointGraph {
             .ok_or("no `bones` list")?;
         for (i, b) in bones.iter().enumerate() {
             if let Some(pair) = b.as_array() {
-                let end = |k: usize| -> std::result::Result<Vec3, String> {
-                    let name = pair.get(k).and_then(|n| n.as_str()).ok_or_else(|| {
-                        format!("bone {i} is not a [parent, child] pair of joint names")
-                    })?;
-                    let j = g
-                        .names
-                        .iter()
-                        .position(|n| n == name)
-                        .ok_or_else(|| format!("bone {i} names an unknown joint `{name}`"))?;
-                    Ok(g.joints[j])
-                };
-                if pair.len() != 2 {
+                let names: Vec<&str> = pair.iter().filter_map(|n| n.as_str()).collect();
+                if names.len() != 2 || pair.len() != 2 {
                     return Err(format!(
                         "bone {i} is not a [parent, child] pair of joint names"
                     ));
                 }
+                let end = |k: usize| {
+                    let name = names[k];
+                    g.names
+                        .iter()
+                        .position(|n| n == name)
+                        .map(|j| g.joints[j])
+                        .ok_or_else(|| format!("bone {i} names an unknown joint `{name}`"))
+                };
                 g.segments.push((end(0)?, end(1)?));
             } else {
                 let name = b.get("name").and_then(|n| n.as_str()).unwrap_or("");

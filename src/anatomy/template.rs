@@ -535,22 +535,22 @@ impl Template {
     /// a bone of the root block the block bone from the same joint whose rest vector is reflected
     /// across the template's `x = 0` plane (the pelvis' two sides); `None` for unpaired bones.
     pub fn mirror_bones(&self) -> Vec<Option<usize>> {
-        let t = self;
-        let mut m = vec![None; t.bones.len()];
-        for c in &t.chains {
+        let mut m = vec![None; self.bones.len()];
+        for c in &self.chains {
             if let Some(mc) = c.mirror {
-                for (a, b) in c.bones.iter().zip(&t.chains[mc].bones) {
+                for (a, b) in c.bones.iter().zip(&self.chains[mc].bones) {
                     m[*a] = Some(*b);
                 }
             }
         }
-        let rest_vec = |b: usize| t.joints[t.bones[b].to].rest - t.joints[t.bones[b].from].rest;
-        for i in t.block_bones() {
+        let rest_vec =
+            |b: usize| self.joints[self.bones[b].to].rest - self.joints[self.bones[b].from].rest;
+        for i in self.block_bones() {
             let v = rest_vec(i);
             let reflected = Vec3::new(-v.x, v.y, v.z);
-            m[i] = t.block_bones().find(|&j| {
+            m[i] = self.block_bones().find(|&j| {
                 j != i
-                    && t.bones[j].from == t.bones[i].from
+                    && self.bones[j].from == self.bones[i].from
                     && (rest_vec(j) - reflected).length() <= 1e-4 * v.length().max(1e-6)
             });
         }

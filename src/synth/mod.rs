@@ -478,10 +478,9 @@ fn jitter_proportions(skel: &mut Skeleton, j: f32, symmetric: bool, rng: &mut Rn
             }
         }
     }
-    for (i, def) in t.bones.iter().enumerate() {
-        if def.kind == BoneKind::Free {
-            skel.bones[i].length *= length_factor[i];
-        }
+    // Bones other than free ones have the factor 1.
+    for (bone, f) in skel.bones.iter_mut().zip(&length_factor) {
+        bone.length *= f;
     }
     for (i, def) in t.bones.iter().enumerate() {
         let s = if def.kind == BoneKind::Block {
