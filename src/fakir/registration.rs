@@ -476,7 +476,8 @@ pub struct Fit {
     pub iterations: usize,
     /// Work units.
     pub units: u64,
-    /// Index of the initial candidate kept.
+    /// Index of the initial candidate kept (the flipped finalist's when the up-down check
+    /// won).
     pub candidate: usize,
     /// Two-sided score (mean distance + occupancy) of each candidate's short registration.
     pub candidate_distances: Vec<f64>,
@@ -911,9 +912,14 @@ fn register_here(
     let lower = |kept: f64, other: f64, _: &WorldSkeleton| other < kept;
     // The up-down check (see the module docs): the best finalist of the other up direction,
     // refined like the fit; the lower score wins.
+    let mut candidate = chosen;
     if flip && let Some(f) = flipped {
         let c = full.start_at(&f.world, f.scale);
         s = full.challenge(s, &ch, (&c, check_span(0)), &mut iterations, lower)?;
+        // The fit now comes from the flipped finalist's placement when it won.
+        if (s.world.root_rotation * Vec3::Y).dot(up) < 0.0 {
+            candidate = f.candidate;
+        }
     }
     // The second facing check (see the module docs): the turned fit wins with both the
     // lower score and the lower implausibility.
@@ -1147,7 +1153,7 @@ fn register_here(
         bone_counts,
         iterations,
         units: s.units,
-        candidate: chosen,
+        candidate,
         candidate_distances: distances,
         support,
         missing,
