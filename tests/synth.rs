@@ -105,29 +105,18 @@ fn symmetric_proportions_give_left_and_right_the_same_bones_and_nothing_else_cha
     for name in pygmalion::anatomy::template::BUILTIN_TEMPLATES {
         let t = Arc::new(Template::builtin(name).unwrap());
         let mirror = t.mirror_bones();
-        let o = SynthOptions {
-            points: 100,
-            seed: 7,
-            proportion_jitter: 0.5,
-            random_pose: false,
-            ..Default::default()
+        let statue = |symmetric: bool| {
+            let o = SynthOptions {
+                points: 100,
+                seed: 7,
+                proportion_jitter: 0.5,
+                random_pose: false,
+                symmetric,
+                ..Default::default()
+            };
+            generate(t.clone(), &o).unwrap()
         };
-        let sym = generate(
-            t.clone(),
-            &SynthOptions {
-                symmetric: true,
-                ..o.clone()
-            },
-        )
-        .unwrap();
-        let lop = generate(
-            t.clone(),
-            &SynthOptions {
-                symmetric: false,
-                ..o
-            },
-        )
-        .unwrap();
+        let (sym, lop) = (statue(true), statue(false));
         let (mut pairs, mut lopsided) = (0, 0);
         for (i, m) in mirror.iter().enumerate() {
             let Some(m) = *m else { continue };

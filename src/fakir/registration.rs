@@ -826,7 +826,7 @@ fn register_here(
     let up = cands[chosen].skeleton.up();
     let flipped = finals
         .into_iter()
-        .filter(|f| cands[f.candidate].skeleton.up().dot(up) < 0.0)
+        .filter(|f| opts.flip && cands[f.candidate].skeleton.up().dot(up) < 0.0)
         .min_by(|a, b| {
             a.score
                 .total_cmp(&b.score)
@@ -879,7 +879,8 @@ fn register_here(
     let recheck = opts.front.is_none()
         && !matches!(opts.init, Init::Given(_))
         && opts.recheck_facing_above.is_finite();
-    let flip = opts.flip && !matches!(opts.init, Init::Given(_)) && flipped.is_some();
+    // (A given skeleton is the only candidate: no finalist is flipped.)
+    let flip = flipped.is_some();
     let uncross = opts.uncross && !matches!(opts.init, Init::Given(_));
     let unfold = opts.unfold && !matches!(opts.init, Init::Given(_));
     let slide = opts.slide && !matches!(opts.init, Init::Given(_));
@@ -917,7 +918,7 @@ fn register_here(
         let c = full.start_at(&f.world, f.scale);
         s = full.challenge(s, &ch, (&c, check_span(0)), &mut iterations, lower)?;
         // The fit now comes from the flipped finalist's placement when it won.
-        if (s.world.root_rotation * Vec3::Y).dot(up) < 0.0 {
+        if s.world.up().dot(up) < 0.0 {
             candidate = f.candidate;
         }
     }

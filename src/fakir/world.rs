@@ -245,7 +245,7 @@ impl WorldSkeleton {
     /// keeps its own. Frames as in [`WorldSkeleton::untwisted`]. The block's own bones turn with it
     /// and take their mirror's radii, as the limbs hanging from them do.
     pub fn turned_around(&self, mirror: &[Option<usize>]) -> WorldSkeleton {
-        let up = self.root_rotation * Vec3::Y;
+        let up = self.up();
         let root =
             (Quat::from_axis_angle(up, std::f32::consts::PI) * self.root_rotation).normalize();
         self.rebuilt(root, mirror)
@@ -260,6 +260,11 @@ impl WorldSkeleton {
     /// trunk's frame down each chain, as at rest.
     pub fn untwisted(&self) -> WorldSkeleton {
         self.rebuilt(self.root_rotation, &vec![None; self.template.bones.len()])
+    }
+
+    /// The figure's up direction: the root frame's `+Y` (as [`Skeleton::up`]).
+    pub fn up(&self) -> Vec3 {
+        self.root_rotation * Vec3::Y
     }
 
     /// The most **crossed** pair of mirrored limb bones (`mirror`, see

@@ -21,8 +21,7 @@
 //!   `1 ± proportion_jitter`; each joint radius (shared along chains) likewise; the root block
 //!   gets one common factor; followers keep their length ratio. With `symmetric`, a left or
 //!   right bone takes its mirror's factors (coherent, stylised proportions rather than a
-//!   lopsided figure). Radii are clamped so that no
-//!   sphere contains its neighbour.
+//!   lopsided figure). Radii are clamped so that no sphere contains its neighbour.
 //! * **Noise** is applied along the normal: Gaussian with standard deviation `noise_sigma`,
 //!   and "Poisson noise" of parameter λ as a zero-mean displacement `K − λ` with
 //!   `K ~ Poisson(λ)` (variance λ), both in output length units (the papers do not define
