@@ -1423,7 +1423,7 @@ fn lost_limbs_registration() {
         (27, "r_upper_arm", 0.3, ARM, &["r_upper_arm"]),
     ];
     for (seed, bone, at, must, may) in cases {
-        check_lost_case(seed, (bone, at), must, may, 6_000, register_posed);
+        check_lost_case(seed, &[(bone, at)], must, may, 6_000, register_posed);
     }
 }
 
@@ -1452,7 +1452,7 @@ fn starved_limbs_registration() {
         ),
     ];
     for (seed, bone, at, must, may) in cases {
-        check_lost_case(seed, (bone, at), must, may, 30_000, register_as_the_cli);
+        check_lost_case(seed, &[(bone, at)], must, may, 30_000, register_as_the_cli);
     }
 }
 
@@ -1467,7 +1467,7 @@ fn a_leg_cut_through_the_thigh_does_not_take_the_other_leg() {
         // below the thighs: 1.71%, the left shin and foot lost.
         check_lost_case(
             62,
-            ("l_thigh", 0.3),
+            &[("l_thigh", 0.3)],
             &["l_shin", "l_foot"],
             &[],
             30_000,
@@ -1487,8 +1487,30 @@ fn a_hand_cut_at_the_wrist_is_found_lost_though_the_forearm_made_room_for_it() {
         // forearm reaching to the hand's end explains its points: the hand is lost.
         check_lost_case(
             98,
-            ("r_hand", 0.0),
+            &[("r_hand", 0.0)],
             &["r_hand"],
+            &[],
+            30_000,
+            register_as_the_cli,
+        )
+    });
+}
+
+#[test]
+fn both_hands_cut_at_the_wrists_are_found_lost() {
+    on_one_thread(|| {
+        // Seed 120 without either hand (cut at the wrists; 30k points, as the CLI runs it).
+        // The left hand took no point and was found lost; the right one, shortened with its
+        // forearm (0.215 + 0.08 against a forearm of 0.33) and laid over the forearm's end,
+        // was covered by the forearm's surface, and the laid-over-parent rule wanted a healthy
+        // mirror: it was reported partial, the right wrist 6.8% of the height off. Examined
+        // again once its mirror is lost, both ends shrunk, the forearm reaching to its end
+        // explains its points (0.0016 against a bound of 0.0136): lost, and the forearm refitted
+        // without it. Measured when written: both lost, 0.33% over the joints left.
+        check_lost_case(
+            120,
+            &[("l_hand", 0.0), ("r_hand", 0.0)],
+            &["l_hand", "r_hand"],
             &[],
             30_000,
             register_as_the_cli,
@@ -1499,20 +1521,20 @@ fn a_hand_cut_at_the_wrist_is_found_lost_though_the_forearm_made_room_for_it() {
 /// A lost-limb case: seed, bone cut, where along it, bones that must be lost, bones that may be.
 type LostCase<'a> = (u64, &'a str, f32, &'a [&'a str], &'a [&'a str]);
 
-/// Registers a statue cut at `cut` (bone, fraction) with `register` and checks level 6: the
+/// Registers a statue cut at `cuts` (bone, fraction each) with `register` and checks level 6: the
 /// bones of `must` are reported lost, nothing outside `must` and `may` is; no point goes to a
 /// lost bone; a lost bone gets its healthy mirror's length; the joints the scan still has
 /// stay within 3% of the height; the lost bones of `must` are bare on the completed
 /// skeleton.
 fn check_lost_case(
     seed: u64,
-    (bone, at): (&str, f32),
+    cuts: &[(&str, f32)],
     must: &[&str],
     may: &[&str],
     points: usize,
     register: fn(&SynthStatue) -> pygmalion::fakir::Fit,
 ) {
-    let s = cut_human(seed, points, &[(bone, at)]);
+    let s = cut_human(seed, points, cuts);
     let fit = register(&s);
     let t = &fit.skeleton.template;
     let lost: Vec<&str> = (0..t.bones.len())
@@ -1540,7 +1562,7 @@ fn check_lost_case(
         / present.len() as f32
         / 1.7;
     println!(
-        "seed {seed}, {bone} cut at {at}: lost {lost:?}, joint error of the {} joints left {:.2}%",
+        "seed {seed}, cut {cuts:?}: lost {lost:?}, joint error of the {} joints left {:.2}%",
         present.len(),
         100.0 * err
     );

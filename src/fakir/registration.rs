@@ -255,7 +255,8 @@
 //!    all lost is lost when its subtree is redundant (its points lie almost as close to the
 //!    other bones; more loosely so when it is starved, with a quarter of the points of its
 //!    mirror's subtree) or when it is bare (no support and no points of its own:
-//!    [`lost_limbs`]).
+//!    [`lost_limbs`]). A hand or foot laid over its parent is lost too, and one whose mirror
+//!    was taken lost is examined again (both hands or both feet broken: [`lost_limbs`]).
 //!    Lost bones get the expected size and pose of the thesis' ch. 5 (the healthy mirror
 //!    limb's, else the template's), take no points, and the rest of the skeleton is refined
 //!    without them (`final_iterations` whole-skeleton iterations, each limb fitted up to
@@ -1473,7 +1474,20 @@ fn examine_support(
 /// with 15% coverage) was taken lost. And a cut takes length away: the last bone and its
 /// parent must be shorter together than [`OVER_PARENT_SHORTER`] times their mirrors (seed
 /// 98: 0.27 against 0.46); without that, the complete seed 23 lost its right hand (forearm
-/// and hand 0.40 against 0.38). One work unit per bone.
+/// and hand 0.40 against 0.38). **Both sides broken** (our choice): a statue that lost both
+/// hands (or both feet) has no healthy mirror to compare with. A last bone not lost whose
+/// mirror was taken lost after it was examined (bones are examined once, from the last) is
+/// examined again: it is lost when it holds no point of its own (a foot folded back along its
+/// shin, whose points the shin takes), or when it is laid over its parent with both ends
+/// shrunk ([`laid_over_parent`]). Measured on synthetic statues cut at both wrists or ankles
+/// (`synth --seed N --rigid --height 1.7 --cut bone:l_hand@0 --cut bone:r_hand@0`, 30k
+/// points; joint error over the joints the scan has): seeds 120 and 121 lost the left hand
+/// and reported the right one partial, its forearm shortened with the hand laid over its end
+/// (right wrist 6.8% and 6.5% of the height off); now both are lost and the forearm refitted
+/// without the hand reaches the cut (0.81% → 0.33%, 0.63% → 0.25%). Seed 123 without its feet
+/// reported the right one partial with no point of its own; now both lost (1.96% both ways).
+/// On 21 other cut statues (one or both hands, feet, forearms or shins; seeds 101–110,
+/// 120–124) it changed nothing. One work unit per bone, and one per bone examined again.
 fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result<Vec<bool>> {
     let t = s.world.template.clone();
     let trunk = super::solver::trunk_bones(&t);
@@ -1512,6 +1526,20 @@ fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result
                     .is_some_and(|e| e < limit * radius));
         s.unit().map_err(cancelled)?;
     }
+    // Both sides broken: a last bone examined before its mirror was taken lost is examined
+    // again by the laid-over-parent rule, which then has no healthy mirror to compare with
+    // and asks both ends to have shrunk instead (see [`laid_over_parent`]).
+    for b in (0..nb).rev() {
+        let again =
+            !lost[b] && t.bones[b].children.is_empty() && mirror[b].is_some_and(|m| lost[m]);
+        if again {
+            let bone = s.world.bones()[b];
+            let radius = 0.5 * (bone.r1 + bone.r2) as f64;
+            lost[b] = s.members_of(&[b]) == 0
+                || laid_over_parent(s, support, (&mirror, &trunk), &lost, b, REDUNDANT * radius);
+            s.unit().map_err(cancelled)?;
+        }
+    }
     Ok(lost)
 }
 
@@ -1519,6 +1547,9 @@ fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result
 /// expected size) whose mirror has support, shorter with its parent than their mirrors (a cut
 /// takes length away), and whose points the parent explains within `bound` once it reaches
 /// to `b`'s end — the hand of a forearm cut at the wrist, the forearm shortened to make room.
+/// When the mirror is lost (both sides broken), `b` and its mirror must both have shrunk
+/// ([`super::support::SHRUNK`]) instead: the shrunk end lies on its parent's surface, so its
+/// support says nothing, and there is no healthy length to compare with.
 /// `mirror` and `trunk`: each bone's mirror and whether it is a trunk bone.
 fn laid_over_parent(
     s: &Solver,
@@ -1535,18 +1566,22 @@ fn laid_over_parent(
     let Some(mp) = mirror[p] else {
         return false;
     };
-    if !support[b].missing
-        || support[mb].missing
-        || !t.bones[b].children.is_empty()
-        || trunk[p]
-        || lost[p]
-        || t.bones[p].kind == BoneKind::Block
+    if !t.bones[b].children.is_empty() || trunk[p] || lost[p] || t.bones[p].kind == BoneKind::Block
     {
         return false;
     }
-    let l = &s.world.lengths;
-    if l[p] + l[b] >= OVER_PARENT_SHORTER * (l[mp] + l[mb]) {
-        return false;
+    // Both ends broken: the mirror was taken lost, and both ends shrank (a cut takes length
+    // away on both sides; the shrunk end is covered by the parent's surface it lies on, so
+    // its support says nothing).
+    let both_broken = lost[mb] && support[b].shrunk && support[mb].shrunk;
+    if !both_broken {
+        let l = &s.world.lengths;
+        if !support[b].missing
+            || support[mb].missing
+            || l[p] + l[b] >= OVER_PARENT_SHORTER * (l[mp] + l[mb])
+        {
+            return false;
+        }
     }
     let all = s.world.bones();
     let reach = Bone::new(all[p].c1, all[p].r1, all[b].c2, all[p].r2);
