@@ -915,7 +915,7 @@ fn register_here(
         // `cands`), their short registrations, the best `finalists` registered at level 0;
         // the finalists' rule picks the start, refined like the fit.
         if let Some(hook) = s.take_pause() {
-            let mut at = lo;
+            let mut at = s.activity.fraction;
             let (more, mut fits) = full.search_up(
                 &template,
                 &level0_points,
@@ -1543,8 +1543,8 @@ fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result
         s.unit().map_err(cancelled)?;
     }
     // Both sides broken: a last bone examined before its mirror was taken lost is examined
-    // again by the laid-over-parent rule, which then has no healthy mirror to compare with
-    // and asks both ends to have shrunk instead (see [`laid_over_parent`]).
+    // again: lost with no point of its own, or by the laid-over-parent rule, which then has
+    // no healthy mirror to compare with and asks both ends to have shrunk instead.
     for b in (0..nb).rev() {
         let again =
             !lost[b] && t.bones[b].children.is_empty() && mirror[b].is_some_and(|m| lost[m]);
@@ -1767,7 +1767,7 @@ struct FullFit {
 impl FullRun<'_> {
     /// The short registration of each placement of `cands` (level 1 in the module docs) on
     /// the `init_subsample` points: one whole-skeleton iteration of one pass, with short LM
-    /// loops; returns each one's two-sided score, its progress shared out over `span`.
+    /// loops; returns each one's two-sided score, its progress shared out over `span_all`.
     fn quick_scores(
         &self,
         cands: &[Candidate],
