@@ -76,11 +76,11 @@
 //!    registered again through level 1 and the refit rounds; it too wins with the lower
 //!    score. Over the same 12 statues (joints the scan has): seed 47 46.7% → 4.1%, seed 68
 //!    9.2% → 0.9%, seed 81 4.8% → 6.4% (a lower score, but its right hand now taken lost),
-//!    43, 44, 45, 48, 49, 70 and 73 unchanged; 46 (still wrong, 48.2% → 41.1%) and 74 (unchanged) were run
-//!    with a first version only (45, 46 and 74 are upright and wrong; told their up, a
-//!    search finds scores 0.0083, 0.0283 and 0.0185 against their fits' 0.0167, 0.031 and
-//!    0.0276, so a search about the fit's own up would help them too; not built). On the six posed
-//!    complete statues where the check runs the fits are the same, for 1.05 to 1.39 times
+//!    43, 44, 45, 48, 49, 70 and 73 unchanged; 46 (still wrong, 48.2% → 41.1%) and 74
+//!    (unchanged) were run with a first version only (45, 46 and 74 are upright and wrong;
+//!    told their up, a search finds scores 0.0083, 0.0283 and 0.0185 against their fits'
+//!    0.0167, 0.031 and 0.0276, so a search about the fit's own up would help them too; not
+//!    built). On the six posed complete statues where the check runs the fits are the same, for 1.05 to 1.39 times
 //!    the work units.
 //!
 //!    **Second facing check** (our choice; skipped like the first): a fit that ends the
