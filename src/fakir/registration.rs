@@ -80,8 +80,8 @@
 //!    (unchanged) were run with a first version only (45, 46 and 74 are upright and wrong;
 //!    told their up, a search finds scores 0.0083, 0.0283 and 0.0185 against their fits'
 //!    0.0167, 0.031 and 0.0276, so a search about the fit's own up would help them too; not
-//!    built). On the six posed complete statues where the check runs the fits are the same, for 1.05 to 1.39 times
-//!    the work units.
+//!    built). On the six posed complete statues where the check runs the fits are the same,
+//!    for 1.05 to 1.39 times the work units.
 //!
 //!    **Second facing check** (our choice; skipped like the first): a fit that ends the
 //!    rounds with its joints far outside their ranges ([`super::init::implausibility`] above
