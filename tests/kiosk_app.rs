@@ -34,6 +34,10 @@ fn config(root: &Path, file: &str) -> KioskConfig {
     c.budget.point_budget = 20_000;
     c.budget.fakir_ms_per_frame = 4.0;
     c.skinning.pose_seconds = 0.2;
+    // No attract mode: under load the registration can outlast its default 60 s of idle
+    // time, and its pose changes would then move the statue these tests watch.
+    c.idle.attract_after_s = 86_400.0;
+    c.idle.still_there_after_s = 86_400.0;
     c
 }
 
