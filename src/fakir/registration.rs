@@ -79,8 +79,10 @@
 //!    43, 44, 45, 48, 49, 70 and 73 unchanged; 46 (still wrong, 48.2% → 41.1%) and 74
 //!    (unchanged) were run with a first version only (45, 46 and 74 are upright and wrong;
 //!    told their up, a search finds scores 0.0083, 0.0283 and 0.0185 against their fits'
-//!    0.0167, 0.031 and 0.0276, so a search about the fit's own up would help them too; not
-//!    built). On the six posed complete statues where the check runs the fits are the same,
+//!    0.0167, 0.031 and 0.0276). A search about the up of the fit's own trunk was built
+//!    and measured on the 12 (README, "A search about the fit's own up"): it mended seed 74
+//!    (29.1% → 2.2%) but broke seed 49 (3.8% → 22.0%) and got the lost set right on 6
+//!    instead of 8, for 1.1 to 2.3 times the work units; not kept. On the six posed complete statues where the check runs the fits are the same,
 //!    for 1.05 to 1.39 times the work units.
 //!
 //!    **Second facing check** (our choice; skipped like the first): a fit that ends the
