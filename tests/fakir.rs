@@ -2292,6 +2292,48 @@ fn sliding_the_block_down_keeps_everything_off_it_in_place() {
 }
 
 #[test]
+fn the_trunk_end_share_is_one_at_rest_and_halves_with_the_neck_and_head() {
+    use pygmalion::anatomy::Template;
+    use std::sync::Arc;
+    for name in ["human", "centaur", "quadruped", "mermaid"] {
+        let t = Arc::new(Template::builtin(name).unwrap());
+        let placed = Skeleton::rest_placed(t.clone(), Vec3::ONE, Quat::from_rotation_z(0.7), 1.7);
+        let mut w = WorldSkeleton::from_skeleton(&placed);
+        let share = w.trunk_end_share().unwrap();
+        assert!((share - 1.0).abs() < 1e-4, "{name} at rest: {share}");
+        // The neck and head (the last two bones of every template's spine) at half length.
+        for b in ["neck", "head"] {
+            w.lengths[t.bone_index(b).unwrap()] *= 0.5;
+        }
+        let share = w.trunk_end_share().unwrap();
+        assert!((share - 0.5).abs() < 1e-4, "{name} squeezed: {share}");
+    }
+}
+
+#[test]
+fn a_fit_squeezed_at_the_head_has_its_block_slid_down() {
+    on_one_thread(squeezed_registration);
+}
+
+fn squeezed_registration() {
+    use pygmalion::fakir::registration::SQUEEZED_END;
+    // `synth --seed 6 --points 39000 --rigid --height 1.7`, registered as `register` does.
+    // Without the squeezed-end trigger its pelvis sat one bone up the spine, the thighs
+    // starting wide enough to cover the hips (so the uncovered-thigh trigger did not fire),
+    // the neck and head squeezed to 0.44 of their share of the trunk chain: joint error
+    // 3.76% of the height. Slid down, it ends at 1.42%.
+    let s = posed_human(6, 39_000);
+    let fit = register_as_the_cli(&s);
+    let err = unswapped_joint_error(&fit.skeleton, &s.truth, "seed 6");
+    assert!(err < 0.02, "seed 6: joint error {err}");
+    let share = WorldSkeleton::from_skeleton(&fit.skeleton)
+        .trunk_end_share()
+        .unwrap();
+    println!("seed 6: trunk end share {share:.2}");
+    assert!(share >= SQUEEZED_END, "seed 6: still squeezed ({share})");
+}
+
+#[test]
 fn sliding_a_limb_down_moves_each_joint_to_the_next() {
     for seed in [3u64, 8, 16, 21] {
         let s = posed_human(seed, 2_000);

@@ -507,6 +507,36 @@ impl WorldSkeleton {
         Some(out)
     }
 
+    /// How much of the trunk chain its last two bones take, relative to the template's rest
+    /// proportions (the trigger of the slid-block check on a squeezed end, level 5 in the
+    /// registration's module docs): `(l_{n−1} + l_n) / (l_1 + … + l_{n−2})` over the fitted
+    /// lengths of the chain carried by the root block ([`WorldSkeleton::slid_block`]'s), the
+    /// same ratio at rest dividing it. 1 at the template's proportions; the human's neck and
+    /// head against its two spine bones. `None` when the template has no such chain of at
+    /// least three bones, or a length is zero.
+    pub fn trunk_end_share(&self) -> Option<f32> {
+        let t = &self.template;
+        let trunk = super::solver::trunk_bones(t);
+        let first = t.bones.iter().enumerate().find_map(|(b, def)| {
+            let p = def.parent?;
+            (def.kind == BoneKind::Free && trunk[b] && t.bones[p].kind == BoneKind::Block)
+                .then_some(b)
+        })?;
+        let line = self.chain_from(first);
+        let n = line.len();
+        if n < 3 {
+            return None;
+        }
+        let rest =
+            |b: usize| (t.joints[t.bones[b].to].rest - t.joints[t.bones[b].from].rest).length();
+        let share = |len: &dyn Fn(usize) -> f32| -> Option<f32> {
+            let end = len(line[n - 2]) + len(line[n - 1]);
+            let start: f32 = line[..n - 2].iter().map(|&b| len(b)).sum();
+            (start > 0.0 && end > 0.0).then(|| end / start)
+        };
+        Some(share(&|b| self.lengths[b])? / share(&rest)?)
+    }
+
     /// The chain from free bone `a` to its end **slid one bone down** (the start of the
     /// slid-limb check): `a` reaches from its first joint to the end of the next bone of its
     /// chain, each later bone takes the direction and length of the one after it, and the
