@@ -2320,7 +2320,7 @@ fn squeezed_registration() {
     // `synth --seed 6 --points 39000 --rigid --height 1.7`, registered as `register` does.
     // Without the squeezed-end trigger its pelvis sat one bone up the spine, the thighs
     // starting wide enough to cover the hips (so the uncovered-thigh trigger did not fire),
-    // the neck and head squeezed to 0.44 of their share of the trunk chain: joint error
+    // the neck and head squeezed to 0.43 of their share of the trunk chain: joint error
     // 3.76% of the height. Slid down, it ends at 1.42%.
     let s = posed_human(6, 39_000);
     let fit = register_as_the_cli(&s);

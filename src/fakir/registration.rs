@@ -203,7 +203,7 @@
 //!    [`SQUEEZED_END`] of their share of the trunk chain at rest
 //!    ([`WorldSkeleton::trunk_end_share`]) the block is slid down whatever the thighs'
 //!    cover. Seed 6 (39k points) had its thighs starting wide enough to cover the hips, so
-//!    the uncovered-thigh trigger missed it, and its neck and head at 0.44 of their share:
+//!    the uncovered-thigh trigger missed it, and its neck and head at 0.43 of their share:
 //!    3.76% → 1.42% of the height. Of 20 more complete figures (seeds 1–12 at ±30%,
 //!    201–208 symmetric at ±50%) it ran on seed 12 (1.33% → 1.25%); of the 12 thigh cuts on
 //!    43 and 49 (unchanged) and 44 (4.00% → 2.62% over the joints the scan has), for 1.13 to
@@ -1758,7 +1758,7 @@ pub const UNCOVERED_REACH: f32 = 0.1;
 /// ([`WorldSkeleton::trunk_end_share`]) is **squeezed** at its end, and the slid-block check
 /// runs (level 5 in the module docs). Synthetic truths (±30% and ±50% proportions, 20
 /// figures) measure 0.83 to 2.0 and good fits of them 0.89 to 2.1; seed 6, whose pelvis sat
-/// one bone up the spine, 0.44.
+/// one bone up the spine, 0.43.
 pub const SQUEEZED_END: f32 = 0.6;
 
 /// The stretched-end check's limit (level 5, see the module docs): a limb chain's last bone
