@@ -108,6 +108,18 @@ pub struct WorldSkeleton {
     rest_lengths: Arc<[f32]>,
 }
 
+/// The trunk's first free bone hanging from the root block (the human's `spine_lower`) and
+/// the block bone carrying it (`pelvis_up`): `(block bone, free bone)`, the first in bone
+/// order; `None` when the template has no block or no trunk chain on it.
+fn trunk_on_block(t: &Template) -> Option<(usize, usize)> {
+    let trunk = super::solver::trunk_bones(t);
+    t.bones.iter().enumerate().find_map(|(b, def)| {
+        let p = def.parent?;
+        (def.kind == BoneKind::Free && trunk[b] && t.bones[p].kind == BoneKind::Block)
+            .then_some((p, b))
+    })
+}
+
 impl WorldSkeleton {
     /// The world view of a skeleton.
     pub fn from_skeleton(s: &Skeleton) -> Self {
@@ -480,13 +492,8 @@ impl WorldSkeleton {
     /// starting above the legs, where no points cover them; this start puts it back.
     pub fn slid_block(&self) -> Option<WorldSkeleton> {
         let t = self.template.clone();
-        let trunk = super::solver::trunk_bones(&t);
         let is_block = |b: usize| t.bones[b].kind == BoneKind::Block;
-        // The block bone carrying the trunk's first free bone.
-        let spine = t.bones.iter().enumerate().find_map(|(b, def)| {
-            let p = def.parent?;
-            (def.kind == BoneKind::Free && trunk[b] && is_block(p)).then_some(p)
-        })?;
+        let (spine, _) = trunk_on_block(&t)?;
         let posed = self.pose();
         let delta = posed.bones[spine].c1 - posed.bones[spine].c2;
         if delta.length() <= 0.0 {
@@ -515,26 +522,18 @@ impl WorldSkeleton {
     /// head against its two spine bones. `None` when the template has no such chain of at
     /// least three bones, or a length is zero.
     pub fn trunk_end_share(&self) -> Option<f32> {
-        let t = &self.template;
-        let trunk = super::solver::trunk_bones(t);
-        let first = t.bones.iter().enumerate().find_map(|(b, def)| {
-            let p = def.parent?;
-            (def.kind == BoneKind::Free && trunk[b] && t.bones[p].kind == BoneKind::Block)
-                .then_some(b)
-        })?;
+        let (_, first) = trunk_on_block(&self.template)?;
         let line = self.chain_from(first);
         let n = line.len();
         if n < 3 {
             return None;
         }
-        let rest =
-            |b: usize| (t.joints[t.bones[b].to].rest - t.joints[t.bones[b].from].rest).length();
         let share = |len: &dyn Fn(usize) -> f32| -> Option<f32> {
             let end = len(line[n - 2]) + len(line[n - 1]);
             let start: f32 = line[..n - 2].iter().map(|&b| len(b)).sum();
             (start > 0.0 && end > 0.0).then(|| end / start)
         };
-        Some(share(&|b| self.lengths[b])? / share(&rest)?)
+        Some(share(&|b| self.lengths[b])? / share(&|b| self.rest_lengths[b])?)
     }
 
     /// The chain from free bone `a` to its end **slid one bone down** (the start of the
