@@ -82,8 +82,9 @@
 //!    0.0167, 0.031 and 0.0276). A search about the up of the fit's own trunk was built
 //!    and measured on the 12 (README, "A search about the fit's own up"): it mended seed 74
 //!    (29.1% → 2.2%) but broke seed 49 (3.8% → 22.0%) and got the lost set right on 6
-//!    instead of 8, for 1.1 to 2.3 times the work units; not kept. On the six posed complete statues where the check runs the fits are the same,
-//!    for 1.05 to 1.39 times the work units.
+//!    instead of 8, for 1.1 to 2.3 times the work units; not kept. On the six posed
+//!    complete statues where the check runs the fits are the same, for 1.05 to 1.39 times
+//!    the work units.
 //!
 //!    **Second facing check** (our choice; skipped like the first): a fit that ends the
 //!    rounds with its joints far outside their ranges ([`super::init::implausibility`] above
@@ -1757,8 +1758,8 @@ pub const UNCOVERED_REACH: f32 = 0.1;
 /// A trunk chain whose last two bones take less than this fraction of their share at rest
 /// ([`WorldSkeleton::trunk_end_share`]) is **squeezed** at its end, and the slid-block check
 /// runs (level 5 in the module docs). Synthetic truths (±30% and ±50% proportions, 20
-/// figures) measure 0.83 to 2.0 and good fits of them 0.89 to 2.1; seed 6, whose pelvis sat
-/// one bone up the spine, 0.43.
+/// figures) measure 0.83 to 2.0, and their fits under 2% of the height 0.89 to 2.1 except
+/// seed 12 (0.53, its head partial); seed 6, whose pelvis sat one bone up the spine, 0.43.
 pub const SQUEEZED_END: f32 = 0.6;
 
 /// The stretched-end check's limit (level 5, see the module docs): a limb chain's last bone
