@@ -8,9 +8,9 @@
 
 use super::assign::Assignment;
 use super::lm::{
-    EnergyAccumulator, EnergyTerms, Limits, LmStep, NO_ROW, NormalAccumulator, OCCUPANCY_SAMPLES,
-    OccupancyTerm, PRIOR_MARGIN, Param, PointRows, RangePrior, Rows, SLICE_POINTS, lm_decide,
-    lm_trial,
+    EnergyAccumulator, EnergyTerms, Limits, LmStep, MAX_PARAMS, NO_ROW, NormalAccumulator,
+    OCCUPANCY_SAMPLES, OCCUPANCY_SLACK, OccupancyTerm, PRIOR_MARGIN, Param, PointRows, RangePrior,
+    Rows, SLICE_POINTS, lm_decide, lm_trial,
 };
 use super::world::{End, RadiusClasses, WorldSkeleton};
 use crate::anatomy::template::BoneKind;
@@ -111,6 +111,10 @@ pub struct SolverSettings {
     /// residuals and gradients instead of projecting again (`RowCache`). The same sums bit for
     /// bit either way (a test registers with and without).
     pub reuse_rows: bool,
+    /// Before each of Algorithm 1's forward or backward passes on a template of one chain
+    /// and no root block, fit the whole chain at once ([`Solver::whole_chain`]; see
+    /// [`super::schedule`]).
+    pub whole_chain: bool,
 }
 
 impl Default for SolverSettings {
@@ -125,6 +129,7 @@ impl Default for SolverSettings {
             seed_chains: true,
             range_prior: true,
             reuse_rows: true,
+            whole_chain: true,
         }
     }
 }
@@ -544,7 +549,7 @@ impl<'p> Solver<'p> {
                             weights: &weights,
                             tree,
                             positions: &self.tree_points,
-                            slack: 2.0 * self.spacing,
+                            slack: OCCUPANCY_SLACK * self.spacing,
                         }),
                         _ => None,
                     },
@@ -751,6 +756,69 @@ impl<'p> Solver<'p> {
                 &energy,
                 &clamp,
             )?;
+            match self.end_round(&energy, before)? {
+                None => break,
+                after => start = after,
+            }
+        }
+        Ok(())
+    }
+
+    /// The parameters of [`Solver::whole_chain`] on `chain`: each bone's two swings about its
+    /// first joint and its length, every radius class of the chain once, and the anchor's
+    /// translation when it is a free root. `None` past [`MAX_PARAMS`].
+    pub fn whole_chain_params(&self, chain: &[usize]) -> Option<Vec<Param>> {
+        let t = &self.world.template;
+        let mut params = Vec::new();
+        let first = *chain.first()?;
+        if self.free_root && t.bones[first].parent.is_none() {
+            params.extend(
+                [Vec3::X, Vec3::Y, Vec3::Z].map(|axis| Param::AnchorMove { bone: first, axis }),
+            );
+        }
+        let mut classes = Vec::new();
+        for &b in chain {
+            let (a1, a2) = self.swing_axes(b);
+            params.push(Param::Swing { bone: b, axis: a1 });
+            params.push(Param::Swing { bone: b, axis: a2 });
+            params.push(Param::Length { bone: b });
+            for end in [End::First, End::Second] {
+                let c = self.classes.class_of(b, end);
+                if !classes.contains(&c) {
+                    classes.push(c);
+                    params.push(Param::Radius { bone: b, end });
+                }
+            }
+        }
+        (params.len() <= MAX_PARAMS).then_some(params)
+    }
+
+    /// **Whole-chain fit** (our addition, for speed; the papers fit one bone or one pair at a
+    /// time): one LM group over every parameter of `chain` at once
+    /// ([`Solver::whole_chain_params`]) on the energy of the chain's points (bones and
+    /// followers), with an assignment refresh after each round (at most `two_bone_rounds`,
+    /// ending when a round changes the energy by under 10⁻⁴). Algorithm 1's passes move one
+    /// joint at a time with its neighbours held, so a chain whose joints are all off settles
+    /// geometrically, a fraction per pass; the whole chain's Gauss–Newton step moves every
+    /// joint together. A chain of more than [`MAX_PARAMS`] parameters is left as it is.
+    pub fn whole_chain(&mut self, chain: &[usize]) -> Result<(), Cancelled> {
+        let Some(params) = self.whole_chain_params(chain) else {
+            return Ok(());
+        };
+        let mut energy = Vec::new();
+        for &b in chain {
+            energy.extend(self.with_followers(b));
+        }
+        let mut start = None;
+        for _ in 0..self.settings.two_bone_rounds {
+            if self.members_of(&energy) == 0 {
+                break;
+            }
+            let before = match start {
+                Some(e) => e,
+                None => self.energy_of(&energy)?,
+            };
+            self.lm(&params, &energy, chain)?;
             match self.end_round(&energy, before)? {
                 None => break,
                 after => start = after,
