@@ -736,19 +736,11 @@ impl<'p> Solver<'p> {
         let mut energy = self.with_followers(a);
         energy.push(b);
         let clamp = [a, b];
-        let mut start = None;
-        for _ in 0..self.settings.two_bone_rounds {
-            if self.members_of(&energy) == 0 {
-                break;
-            }
-            let before = match start {
-                Some(e) => e,
-                None => self.energy_of(&energy)?,
-            };
-            self.lm(&[Param::PairRotate { a, b }], &energy, &clamp)?;
-            self.lm(&[Param::PairLength { a, b, first: true }], &energy, &clamp)?;
-            self.lm(&[Param::PairLength { a, b, first: false }], &energy, &clamp)?;
-            self.lm(
+        self.fit_rounds(&energy, |s| {
+            s.lm(&[Param::PairRotate { a, b }], &energy, &clamp)?;
+            s.lm(&[Param::PairLength { a, b, first: true }], &energy, &clamp)?;
+            s.lm(&[Param::PairLength { a, b, first: false }], &energy, &clamp)?;
+            s.lm(
                 &[Param::Radius {
                     bone: a,
                     end: End::Second,
@@ -756,7 +748,29 @@ impl<'p> Solver<'p> {
                 &energy,
                 &clamp,
             )?;
-            match self.end_round(&energy, before)? {
+            Ok(())
+        })
+    }
+
+    /// Rounds of a fit on the points of `energy` (at most `two_bone_rounds`): `round`'s LM
+    /// groups, then an assignment refresh; they end when a round changes the energy by under
+    /// 10⁻⁴ (relative, [`Solver::end_round`]) or no point is left.
+    fn fit_rounds(
+        &mut self,
+        energy: &[usize],
+        mut round: impl FnMut(&mut Self) -> Result<(), Cancelled>,
+    ) -> Result<(), Cancelled> {
+        let mut start = None;
+        for _ in 0..self.settings.two_bone_rounds {
+            if self.members_of(energy) == 0 {
+                break;
+            }
+            let before = match start {
+                Some(e) => e,
+                None => self.energy_of(energy)?,
+            };
+            round(self)?;
+            match self.end_round(energy, before)? {
                 None => break,
                 after => start = after,
             }
@@ -809,22 +823,7 @@ impl<'p> Solver<'p> {
         for &b in chain {
             energy.extend(self.with_followers(b));
         }
-        let mut start = None;
-        for _ in 0..self.settings.two_bone_rounds {
-            if self.members_of(&energy) == 0 {
-                break;
-            }
-            let before = match start {
-                Some(e) => e,
-                None => self.energy_of(&energy)?,
-            };
-            self.lm(&params, &energy, chain)?;
-            match self.end_round(&energy, before)? {
-                None => break,
-                after => start = after,
-            }
-        }
-        Ok(())
+        self.fit_rounds(&energy, |s| s.lm(&params, &energy, chain).map(|_| ()))
     }
 
     /// Fit of the root block (position, orientation, common scale) on the points of the block
