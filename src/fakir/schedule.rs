@@ -12,25 +12,24 @@
 //!    — which only moves when the anchor is free, as in the papers' chain experiment).
 //! 3. **Convergence (our choice):** passes stop when the chain's energy decreases by less
 //!    than `chain_tolerance` (relative, default 1e-3) over a pass, or after `max_passes`.
-//! 4. **Whole-chain fit (our addition, for speed; setting `whole_chain`), on a template of
-//!    one chain and no root block only:** before each forward or backward pass, one LM
-//!    group over every parameter of the chain at once ([`Solver::whole_chain`]: each bone's
-//!    two swings and length, each radius class once). A pass moves one joint with its
-//!    neighbours held, so a chain whose joints are all off settles by a fraction per pass
-//!    (on the papers' chain about 0.6 of the mean distance is left after each pass, and 10
-//!    passes left 0.023 of a length of 140); the whole chain's Gauss–Newton step moves every
-//!    joint together (test `the_whole_chain_fit_settles_a_chain_whose_joints_are_all_off`).
-//!    `fakir/chain4_5k`: 8,161 → 4,080 work units, mean distance 0.0091 → 0.0103, joint
-//!    error 0.017% → 0.032% of the length (the mean distance still under the papers'
-//!    10⁻⁴ of the length, 0.014).
-//!    **Not on templates of several chains:** on the 16 posed humans of
-//!    `fakir/accuracy_posed` (run after each pass, with the occupancy slack at 4 spacings
-//!    instead of 2, see [`super::lm::OCCUPANCY_SLACK`]) it took the statues under 2% of the height from 13 to
-//!    12, the 90th percentile from 4.4% to 5.0%, and the median time per statue from 32 s to
-//!    42 s (likely because a chain's step there also swings the chains hanging from it,
-//!    whose points are not in its energy; not checked). With a noisy tip it may also slide the last joint along the chain
-//!    (σ = 2 on the papers' chain: the tip 2.9 off against 0.8), where the data term is
-//!    flat (a longer, thinner last bone fits the noisy cap as well).
+//! 4. **Whole-chain fit (our addition, for speed; setting `whole_chain`), on a template of one
+//!    chain and no root block only:** before each forward or backward pass, one LM group over every
+//!    parameter of the chain at once ([`Solver::whole_chain`]: each bone's two swings and length,
+//!    each radius class once). A pass moves one joint with its neighbours held, so a chain whose
+//!    joints are all off settles by a fraction per pass (on the papers' chain about 0.6 of the mean
+//!    distance is left after each pass, and 10 passes left 0.023 of a length of 140); the whole
+//!    chain's Gauss–Newton step moves every joint together (test
+//!    `the_whole_chain_fit_settles_a_chain_whose_joints_are_all_off`). `fakir/chain4_5k`: 8,161 →
+//!    4,080 work units, mean distance 0.0091 → 0.0103, joint error 0.017% → 0.032% of the length
+//!    (the mean distance still under the papers' 10⁻⁴ of the length, 0.014). **Not on templates of
+//!    several chains:** on the 16 posed humans of `fakir/accuracy_posed` (run after each pass, with
+//!    the occupancy slack at 4 spacings instead of 2, see [`super::lm::OCCUPANCY_SLACK`]) it took
+//!    the statues under 2% of the height from 13 to 12, the 90th percentile from 4.4% to 5.0%, and
+//!    the median time per statue from 32 s to 42 s (likely because a chain's step there also swings
+//!    the chains hanging from it, whose points are not in its energy; not checked). With a noisy
+//!    tip it may also slide the last joint along the chain (σ = 2 on the papers' chain: the tip 2.9
+//!    off against 0.8), where the data term is flat (a longer, thinner last bone fits the noisy cap
+//!    as well).
 //!
 //! ## Seeding (our addition)
 //! A fresh registration first **seeds** every limb chain (every chain after the first, the
