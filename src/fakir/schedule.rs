@@ -124,10 +124,7 @@ pub fn single_chain(t: &crate::anatomy::Template) -> bool {
 
 /// Energy of a chain's points (bones and their followers).
 pub fn chain_energy(s: &mut Solver, chain: &[usize]) -> Result<f64, Cancelled> {
-    let mut bones = Vec::new();
-    for &b in chain {
-        bones.extend(s.with_followers(b));
-    }
+    let bones = s.chain_with_followers(chain);
     s.energy_of(&bones)
 }
 

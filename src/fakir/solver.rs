@@ -455,6 +455,11 @@ impl<'p> Solver<'p> {
         v
     }
 
+    /// The bones of `chain` and their followers (a chain's energy).
+    pub fn chain_with_followers(&self, chain: &[usize]) -> Vec<usize> {
+        chain.iter().flat_map(|&b| self.with_followers(b)).collect()
+    }
+
     /// Runs LM iterations of `params` on the energy of `energy_bones` (their points, plus the
     /// occupancy of their surface when enabled) until they stop improving; returns the final
     /// energy.
@@ -811,18 +816,14 @@ impl<'p> Solver<'p> {
     /// time): one LM group over every parameter of `chain` at once
     /// ([`Solver::whole_chain_params`]) on the energy of the chain's points (bones and
     /// followers), with an assignment refresh after each round (at most `two_bone_rounds`,
-    /// ending when a round changes the energy by under 10⁻⁴). Algorithm 1's passes move one
-    /// joint at a time with its neighbours held, so a chain whose joints are all off settles
-    /// geometrically, a fraction per pass; the whole chain's Gauss–Newton step moves every
-    /// joint together. A chain of more than [`MAX_PARAMS`] parameters is left as it is.
+    /// ending when a round changes the energy by under 10⁻⁴); why and where it runs: step 4
+    /// of [`super::schedule`]. A chain of more than [`MAX_PARAMS`] parameters is left as it
+    /// is.
     pub fn whole_chain(&mut self, chain: &[usize]) -> Result<(), Cancelled> {
         let Some(params) = self.whole_chain_params(chain) else {
             return Ok(());
         };
-        let mut energy = Vec::new();
-        for &b in chain {
-            energy.extend(self.with_followers(b));
-        }
+        let energy = self.chain_with_followers(chain);
         self.fit_rounds(&energy, |s| s.lm(&params, &energy, chain).map(|_| ()))
     }
 
