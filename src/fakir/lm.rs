@@ -57,11 +57,10 @@ use rayon::prelude::*;
 /// Largest parameter group (the whole-chain fit of [`super::solver::Solver::whole_chain`]
 /// takes up to four parameters per bone; the papers' groups take 1 to 7).
 ///
-/// Every group's sums are held in arrays of this size, so the papers' small groups pay for
-/// the whole-chain fit's room: `bench --only fakir/human_10k` (one run each, in turn, two
-/// pairs, the same 1,684,002 units and joint error) 36.21 and 36.41 s at 7 against 36.95 and
-/// 37.18 s at 32, about 2% slower. Not mended yet: sizing the per-chunk sums by the group
-/// (a stride of 7 or 32) would keep the sums, so the fits, bit for bit.
+/// Only a Jacobian row (on the stack) has this size: the sums ([`NormalEquations`]), the
+/// geometry derivatives and the damped system are sized by the group, so the papers' small
+/// groups do not pay for the whole-chain fit's room (with every sum held at `32 × 32`,
+/// `fakir/human_10k` ran about 2% slower than at 7; see the README).
 pub const MAX_PARAMS: usize = 32;
 
 /// One scalar parameter of the skeleton, applied as an increment to the current state.
@@ -715,11 +714,67 @@ struct GeoDeriv {
     dr2: f32,
 }
 
-/// `(JᵀJ, Jᵀr, energy)` of [`normal_equations`].
-pub type NormalEquations = ([f64; MAX_PARAMS * MAX_PARAMS], [f64; MAX_PARAMS], f64);
+/// The normal-equation sums of a group of `k` parameters: `JᵀJ` (`k × k`, row-major, upper
+/// triangle and diagonal filled), `Jᵀr` and the energy `rᵀr`.
+///
+/// Sized by the group, not by [`MAX_PARAMS`]: the papers' groups (1 to 7 parameters) do not
+/// pay for the whole-chain fit's room.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NormalEquations {
+    /// `JᵀJ`, row-major with stride `k` (upper triangle and diagonal).
+    pub jtj: Vec<f64>,
+    /// `Jᵀr`.
+    pub jtr: Vec<f64>,
+    /// `rᵀr`.
+    pub energy: f64,
+}
 
-/// Normal-equation terms of a parameter group at the current state: `(JᵀJ, Jᵀr, energy)`
-/// (row-major `MAX_PARAMS × MAX_PARAMS`, upper triangle and diagonal filled).
+impl NormalEquations {
+    /// Zero sums for `k` parameters.
+    pub fn zeros(k: usize) -> Self {
+        NormalEquations {
+            jtj: vec![0.0; k * k],
+            jtr: vec![0.0; k],
+            energy: 0.0,
+        }
+    }
+
+    /// Number of parameters.
+    pub fn k(&self) -> usize {
+        self.jtr.len()
+    }
+
+    /// Adds one residual `r` with its Jacobian row (`k` entries) to `JᵀJ` (upper triangle)
+    /// and `Jᵀr` (not to the energy).
+    #[inline]
+    fn add_row(&mut self, row: &[f64], r: f64) {
+        let k = self.k();
+        let row = &row[..k];
+        for (j, (&rj, tr)) in row.iter().zip(&mut self.jtr).enumerate() {
+            *tr += rj * r;
+            let upper = &mut self.jtj[j * k + j..(j + 1) * k];
+            for (x, &rm) in upper.iter_mut().zip(&row[j..]) {
+                *x += rj * rm;
+            }
+        }
+    }
+
+    /// Adds the sums of `other` (same `k`) entry by entry.
+    fn add(&mut self, other: &NormalEquations) {
+        let k = self.k();
+        for j in 0..k {
+            let upper = j * k + j..(j + 1) * k;
+            for (x, y) in self.jtj[upper.clone()].iter_mut().zip(&other.jtj[upper]) {
+                *x += y;
+            }
+            self.jtr[j] += other.jtr[j];
+        }
+        self.energy += other.energy;
+    }
+}
+
+/// Normal-equation terms of a parameter group at the current state (see
+/// [`NormalEquations`]).
 pub fn normal_equations(
     w: &WorldSkeleton,
     classes: &RadiusClasses,
@@ -732,37 +787,18 @@ pub fn normal_equations(
     acc.finish(w, terms)
 }
 
-/// Adds one residual `r` with its Jacobian row (first `k` entries) to `JᵀJ` (upper triangle)
-/// and `Jᵀr`.
-#[inline]
-fn add_row(
-    jtj: &mut [f64; MAX_PARAMS * MAX_PARAMS],
-    jtr: &mut [f64; MAX_PARAMS],
-    row: &[f64; MAX_PARAMS],
-    r: f64,
-    k: usize,
-) {
-    for j in 0..k {
-        jtr[j] += row[j] * r;
-        for m in j..k {
-            jtj[j * MAX_PARAMS + m] += row[j] * row[m];
-        }
-    }
-}
-
 /// [`normal_equations`] summed slice by slice ([`SLICE_POINTS`] points of the members at a
 /// time), with exactly the sums of an unsliced pass: `new` takes the geometry Jacobian,
 /// `feed` adds the members' rows in order, `finish` adds the occupancy and prior rows.
 pub struct NormalAccumulator {
     k: usize,
     bones: Vec<Bone>,
-    geo: Vec<[GeoDeriv; MAX_PARAMS]>,
+    /// `geo[b * k + j]`: the derivatives of bone `b` with respect to parameter `j`.
+    geo: Vec<GeoDeriv>,
     occ_deriv: Vec<Vec<Vec3>>,
     prior_deriv: Vec<Vec<f64>>,
     cursor: Cursor,
-    jtj: [f64; MAX_PARAMS * MAX_PARAMS],
-    jtr: [f64; MAX_PARAMS],
-    energy: f64,
+    sums: NormalEquations,
 }
 
 impl NormalAccumulator {
@@ -779,9 +815,9 @@ impl NormalAccumulator {
         assert!(k > 0 && k <= MAX_PARAMS);
         let bones = w.bones();
         // Geometry Jacobian by central differences of the forward kinematics.
-        let mut geo = vec![[GeoDeriv::default(); MAX_PARAMS]; bones.len()];
-        let mut occ_deriv: Vec<Vec<Vec3>> = vec![Vec::new(); MAX_PARAMS];
-        let mut prior_deriv: Vec<Vec<f64>> = vec![Vec::new(); MAX_PARAMS];
+        let mut geo = vec![GeoDeriv::default(); bones.len() * k];
+        let mut occ_deriv: Vec<Vec<Vec3>> = vec![Vec::new(); k];
+        let mut prior_deriv: Vec<Vec<f64>> = vec![Vec::new(); k];
         for (j, p) in params.iter().enumerate() {
             let h = fd_step(p, size);
             let mut plus = w.clone();
@@ -807,7 +843,7 @@ impl NormalAccumulator {
             }
             for &b in terms.bones {
                 let inv = 1.0 / (2.0 * h);
-                geo[b][j] = GeoDeriv {
+                geo[b * k + j] = GeoDeriv {
                     dc1: (bp[b].c1 - bm[b].c1) * inv,
                     dc2: (bp[b].c2 - bm[b].c2) * inv,
                     dr1: (bp[b].r1 - bm[b].r1) * inv,
@@ -822,9 +858,7 @@ impl NormalAccumulator {
             occ_deriv,
             prior_deriv,
             cursor: Cursor::default(),
-            jtj: [0.0; MAX_PARAMS * MAX_PARAMS],
-            jtr: [0.0; MAX_PARAMS],
-            energy: 0.0,
+            sums: NormalEquations::zeros(k),
         }
     }
 
@@ -838,38 +872,30 @@ impl NormalAccumulator {
     pub fn feed_rows(&mut self, terms: &EnergyTerms, budget: usize, rows: &mut Rows) -> bool {
         let a = terms.assignment;
         let k = self.k;
-        let (geo, jtj, jtr, energy) = (&self.geo, &mut self.jtj, &mut self.jtr, &mut self.energy);
+        let (geo, sums) = (&self.geo, &mut self.sums);
         self.cursor
             .advance(terms, &self.bones, budget, |b, pb, run, at, _| {
-                let g = &geo[b];
+                let g = &geo[b * k..(b + 1) * k];
                 let parts = chunk_rows(a, pb, run, at, rows, |c| {
-                    let mut jtj = [0.0f64; MAX_PARAMS * MAX_PARAMS];
-                    let mut jtr = [0.0f64; MAX_PARAMS];
+                    let mut part = NormalEquations::zeros(k);
                     let mut e = 0.0f64;
                     let mut row = [0.0f64; MAX_PARAMS];
                     for (r, grad) in c {
                         let r = *r as f64;
                         e += r * r;
-                        for j in 0..k {
-                            let d = &g[j];
-                            row[j] = (grad.dc1.dot(d.dc1)
+                        for (x, d) in row.iter_mut().zip(g) {
+                            *x = (grad.dc1.dot(d.dc1)
                                 + grad.dc2.dot(d.dc2)
                                 + grad.dr1 * d.dr1
                                 + grad.dr2 * d.dr2) as f64;
                         }
-                        add_row(&mut jtj, &mut jtr, &row, r, k);
+                        part.add_row(&row[..k], r);
                     }
-                    (jtj, jtr, e)
+                    part.energy = e;
+                    part
                 });
-                for (pj, pr, pe) in parts {
-                    // Only the group's upper triangle is filled.
-                    for j in 0..k {
-                        for m in j..k {
-                            jtj[j * MAX_PARAMS + m] += pj[j * MAX_PARAMS + m];
-                        }
-                        jtr[j] += pr[j];
-                    }
-                    *energy += pe;
+                for part in &parts {
+                    sums.add(part);
                 }
             })
     }
@@ -877,28 +903,27 @@ impl NormalAccumulator {
     /// Adds the occupancy and prior rows (at the state `w` given to `new`) and returns
     /// `(JᵀJ, Jᵀr, energy)`, once [`NormalAccumulator::feed`] returned true.
     pub fn finish(self, w: &WorldSkeleton, terms: &EnergyTerms) -> NormalEquations {
-        let (k, mut jtj, mut jtr, mut energy) = (self.k, self.jtj, self.jtr, self.energy);
+        let (k, mut sums) = (self.k, self.sums);
+        let mut row = [0.0f64; MAX_PARAMS];
         if let Some(occ) = &terms.occupancy {
             for (q, (r, e, wgt)) in occ.residuals(w).iter().enumerate() {
-                let mut row = [0.0f64; MAX_PARAMS];
-                for (x, d) in row.iter_mut().zip(&self.occ_deriv).take(k) {
+                for (x, d) in row.iter_mut().zip(&self.occ_deriv) {
                     *x = wgt * e.dot(d[q]) as f64;
                 }
-                energy += r * r;
-                add_row(&mut jtj, &mut jtr, &row, *r, k);
+                sums.energy += r * r;
+                sums.add_row(&row[..k], *r);
             }
         }
         if let Some(prior) = &terms.prior {
             for (q, r) in prior.residuals(w).iter().enumerate() {
-                let mut row = [0.0f64; MAX_PARAMS];
-                for (x, d) in row.iter_mut().zip(&self.prior_deriv).take(k) {
+                for (x, d) in row.iter_mut().zip(&self.prior_deriv) {
                     *x = d[q];
                 }
-                energy += r * r;
-                add_row(&mut jtj, &mut jtr, &row, *r, k);
+                sums.energy += r * r;
+                sums.add_row(&row[..k], *r);
             }
         }
-        (jtj, jtr, energy)
+        sums
     }
 }
 
@@ -918,22 +943,21 @@ pub fn lm_trial(
     clamp_bones: &[usize],
 ) -> Option<(WorldSkeleton, f64)> {
     let k = params.len();
-    let (mut jtj, jtr, _) = *ne;
-    for j in 0..k {
-        for m in 0..j {
-            jtj[j * MAX_PARAMS + m] = jtj[m * MAX_PARAMS + j];
-        }
-    }
-    // Damped normal equations.
-    let mut mat = [0.0f64; MAX_PARAMS * MAX_PARAMS];
+    debug_assert_eq!(ne.k(), k);
+    // Damped normal equations (the lower triangle mirrored from the upper).
+    let mut mat = vec![0.0f64; k * k];
     let mut rhs = [0.0f64; MAX_PARAMS];
     for j in 0..k {
         for m in 0..k {
-            mat[j * MAX_PARAMS + m] = jtj[j * MAX_PARAMS + m];
+            mat[j * k + m] = if m < j {
+                ne.jtj[m * k + j]
+            } else {
+                ne.jtj[j * k + m]
+            };
         }
-        let d = jtj[j * MAX_PARAMS + j];
-        mat[j * MAX_PARAMS + j] = d + *lambda * d.max(1e-12);
-        rhs[j] = -jtr[j];
+        let d = ne.jtj[j * k + j];
+        mat[j * k + j] = d + *lambda * d.max(1e-12);
+        rhs[j] = -ne.jtr[j];
     }
     let Some(delta) = solve(&mut mat, &mut rhs, k) else {
         *lambda *= 10.0;
@@ -960,7 +984,7 @@ pub fn lm_decide(
     lambda: &mut f64,
     cache: &mut Option<NormalEquations>,
 ) -> LmStep {
-    let energy = cache.map_or(f64::INFINITY, |ne| ne.2);
+    let energy = cache.as_ref().map_or(f64::INFINITY, |ne| ne.energy);
     if after < energy {
         *w = trial;
         *cache = None;
@@ -982,31 +1006,25 @@ pub fn lm_decide(
     }
 }
 
-/// Solves the `k × k` system in place by Gaussian elimination with partial pivoting.
-fn solve(
-    m: &mut [f64; MAX_PARAMS * MAX_PARAMS],
-    rhs: &mut [f64; MAX_PARAMS],
-    k: usize,
-) -> Option<[f64; MAX_PARAMS]> {
+/// Solves the `k × k` system `m` (row-major, stride `k`) in place by Gaussian elimination
+/// with partial pivoting.
+fn solve(m: &mut [f64], rhs: &mut [f64; MAX_PARAMS], k: usize) -> Option<[f64; MAX_PARAMS]> {
     for col in 0..k {
-        let piv = (col..k).max_by(|&x, &y| {
-            m[x * MAX_PARAMS + col]
-                .abs()
-                .total_cmp(&m[y * MAX_PARAMS + col].abs())
-        })?;
-        if !(m[piv * MAX_PARAMS + col].abs() > 1e-300) {
+        let piv =
+            (col..k).max_by(|&x, &y| m[x * k + col].abs().total_cmp(&m[y * k + col].abs()))?;
+        if !(m[piv * k + col].abs() > 1e-300) {
             return None;
         }
         if piv != col {
             for c in 0..k {
-                m.swap(piv * MAX_PARAMS + c, col * MAX_PARAMS + c);
+                m.swap(piv * k + c, col * k + c);
             }
             rhs.swap(piv, col);
         }
         for r in col + 1..k {
-            let f = m[r * MAX_PARAMS + col] / m[col * MAX_PARAMS + col];
+            let f = m[r * k + col] / m[col * k + col];
             for c in col..k {
-                m[r * MAX_PARAMS + c] -= f * m[col * MAX_PARAMS + c];
+                m[r * k + c] -= f * m[col * k + c];
             }
             rhs[r] -= f * rhs[col];
         }
@@ -1015,9 +1033,9 @@ fn solve(
     for r in (0..k).rev() {
         let mut s = rhs[r];
         for c in r + 1..k {
-            s -= m[r * MAX_PARAMS + c] * x[c];
+            s -= m[r * k + c] * x[c];
         }
-        x[r] = s / m[r * MAX_PARAMS + r];
+        x[r] = s / m[r * k + r];
         if !x[r].is_finite() {
             return None;
         }

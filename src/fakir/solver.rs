@@ -567,34 +567,25 @@ impl<'p> Solver<'p> {
             // energy's bones: each is cut into work units of at most `SLICE_POINTS` points (the
             // kiosk's frames are cut at unit boundaries; a 100k-point level 1 gives a bone pair
             // tens of thousands of points).
-            let ne = match normal_eq {
-                Some(ne) => ne,
-                None => {
-                    let mut acc = {
-                        let terms = terms!();
-                        if terms.count() == 0 && terms.occupancy.is_none() {
-                            return Ok(0.0);
-                        }
-                        NormalAccumulator::new(
-                            &self.world,
-                            &self.classes,
-                            params,
-                            &terms,
-                            self.size,
-                        )
-                    };
-                    let geometry = self.world.bones();
-                    let mut pass = self.begin_pass(energy_bones, &geometry);
-                    while !acc.feed_rows(&terms!(), SLICE_POINTS, &mut pass.rows()) {
-                        self.unit()?;
+            if normal_eq.is_none() {
+                let mut acc = {
+                    let terms = terms!();
+                    if terms.count() == 0 && terms.occupancy.is_none() {
+                        return Ok(0.0);
                     }
-                    self.end_pass(pass, Some((energy_bones, geometry)));
-                    let ne = acc.finish(&self.world, &terms!());
-                    normal_eq = Some(ne);
+                    NormalAccumulator::new(&self.world, &self.classes, params, &terms, self.size)
+                };
+                let geometry = self.world.bones();
+                let mut pass = self.begin_pass(energy_bones, &geometry);
+                while !acc.feed_rows(&terms!(), SLICE_POINTS, &mut pass.rows()) {
                     self.unit()?;
-                    ne
                 }
-            };
+                self.end_pass(pass, Some((energy_bones, geometry)));
+                normal_eq = Some(acc.finish(&self.world, &terms!()));
+                self.unit()?;
+            }
+            let ne = normal_eq.as_ref().expect("normal equations just summed");
+            let energy_before = ne.energy;
             let limits = if self.calibrating {
                 &self.calibration_limits
             } else {
@@ -605,7 +596,7 @@ impl<'p> Solver<'p> {
                 &self.classes,
                 limits,
                 params,
-                &ne,
+                ne,
                 &mut lambda,
                 clamp_bones,
             );
@@ -633,8 +624,8 @@ impl<'p> Solver<'p> {
                 }
                 // A singular system: a rejected step.
                 None => LmStep {
-                    energy_before: ne.2,
-                    energy_after: ne.2,
+                    energy_before,
+                    energy_after: energy_before,
                     accepted: false,
                     step_norm: 0.0,
                 },
