@@ -2103,6 +2103,25 @@ fn a_statue_whose_flipped_finalist_fits_badly_is_searched_upright() {
     on_one_thread(|| upside_down_registration(47, ("r_thigh", 0.5), 0.07))
 }
 
+#[test]
+fn a_cut_limb_whose_hand_holds_no_point_is_found_lost() {
+    // `synth --seed 300 --rigid --height 1.7 --cut bone:l_upper_arm@0.5` (30k points, held
+    // out while the lost-limb rules were built), registered as `register` does. FAKIR folds
+    // the forearm back along the stump and lays the hand, which takes no point, on the chest,
+    // where it is covered: nothing was found lost. A starved subtree holding no point is lost
+    // ("empty", `lost_limbs`): the forearm and the hand are (0.61% of the height in joint
+    // error over the joints the scan has). The guard at 2%.
+    on_one_thread(|| {
+        let s = cut_human(300, 30_000, &[("l_upper_arm", 0.5)]);
+        let fit = register_as_the_cli(&s);
+        assert_eq!(fit.missing_names(), ["l_forearm", "l_hand"], "seed 300");
+        let below = ["l_elbow", "l_wrist", "l_hand_tip"];
+        let err = joint_error_without(&fit.skeleton, &s.truth, &below, 1.7, false);
+        println!("seed 300: joint error {:.2}%", 100.0 * err);
+        assert!(err < 0.02, "seed 300: joint error {err}");
+    })
+}
+
 /// Registers `seed` cut at `cut` as the CLI does: the joints the scan has (those below the cut
 /// thigh left out) within `bound` of the height, and the fit upright (its pelvis-to-neck
 /// direction within 30° of the truth's).

@@ -1495,7 +1495,13 @@ fn examine_support(
 /// instead of 14; on 32 complete ones it also took seed 15's right hand, which the fit had
 /// laid off the statue (a fifth of its mirror's points, no support; completed from the left
 /// one, its joint error went from 5.6% to 6.8%), besides the hands of seeds 10 and 12 the
-/// redundancy bound already took. Support alone is not enough: on real scans a fitted bone
+/// redundancy bound already took. **Empty** (our choice): a starved subtree holding no
+/// point at all is lost, whatever its support: its removal costs nothing (the redundancy test
+/// has no point to average over). On seed 300 cut through the left upper arm at 0.5 FAKIR
+/// folded the forearm back along the stump and laid the hand, without a point, on the chest
+/// (covered there): nothing was found lost; now the forearm and hand are (`synth --seed 300
+/// --rigid --height 1.7 --cut bone:l_upper_arm@0.5`, 30k points). Support alone is not
+/// enough: on real scans a fitted bone
 /// thicker than a draped limb, a foot on a plinth set aside, or a hand that FAKIR shrank,
 /// has little coverage but points of its own that nothing else explains (measured on
 /// `../shared/data`: the feet of Theodoric, Zenobia and Maria, the Faun's left arm and
@@ -1556,11 +1562,15 @@ fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result
         } else {
             REDUNDANT
         };
+        // Empty: starved of every point (its mirror's subtree holds some); its removal costs
+        // nothing ([`Solver::removal_excess`] has no point to average over).
+        let empty = starved && own == 0;
         lost[b] = bare
             || laid_over_parent(s, support, (&mirror, &trunk), &lost, b, limit * radius)
             || (!hangs_from_trunk
-                && s.removal_excess(b, &lost)
-                    .is_some_and(|e| e < limit * radius));
+                && (empty
+                    || s.removal_excess(b, &lost)
+                        .is_some_and(|e| e < limit * radius)));
         s.unit().map_err(cancelled)?;
     }
     // Both sides broken: a last bone examined before its mirror was taken lost is examined
