@@ -744,10 +744,11 @@ impl NormalEquations {
         self.jtr.len()
     }
 
-    /// Adds one residual `r` with its Jacobian row (`k` entries) to `JᵀJ` (upper triangle)
-    /// and `Jᵀr` (not to the energy).
+    /// Adds one residual `r` with its Jacobian row (`k` entries): `r²` to the energy, the
+    /// row to `JᵀJ` (upper triangle) and `Jᵀr`.
     #[inline]
     fn add_row(&mut self, row: &[f64], r: f64) {
+        self.energy += r * r;
         let k = self.k();
         let row = &row[..k];
         for (j, (&rj, tr)) in row.iter().zip(&mut self.jtr).enumerate() {
@@ -878,11 +879,9 @@ impl NormalAccumulator {
                 let g = &geo[b * k..(b + 1) * k];
                 let parts = chunk_rows(a, pb, run, at, rows, |c| {
                     let mut part = NormalEquations::zeros(k);
-                    let mut e = 0.0f64;
                     let mut row = [0.0f64; MAX_PARAMS];
                     for (r, grad) in c {
                         let r = *r as f64;
-                        e += r * r;
                         for (x, d) in row.iter_mut().zip(g) {
                             *x = (grad.dc1.dot(d.dc1)
                                 + grad.dc2.dot(d.dc2)
@@ -891,7 +890,6 @@ impl NormalAccumulator {
                         }
                         part.add_row(&row[..k], r);
                     }
-                    part.energy = e;
                     part
                 });
                 for part in &parts {
@@ -900,8 +898,8 @@ impl NormalAccumulator {
             })
     }
 
-    /// Adds the occupancy and prior rows (at the state `w` given to `new`) and returns
-    /// `(JᵀJ, Jᵀr, energy)`, once [`NormalAccumulator::feed`] returned true.
+    /// Adds the occupancy and prior rows (at the state `w` given to `new`) and returns the
+    /// sums, once [`NormalAccumulator::feed`] returned true.
     pub fn finish(self, w: &WorldSkeleton, terms: &EnergyTerms) -> NormalEquations {
         let (k, mut sums) = (self.k, self.sums);
         let mut row = [0.0f64; MAX_PARAMS];
@@ -910,7 +908,6 @@ impl NormalAccumulator {
                 for (x, d) in row.iter_mut().zip(&self.occ_deriv) {
                     *x = wgt * e.dot(d[q]) as f64;
                 }
-                sums.energy += r * r;
                 sums.add_row(&row[..k], *r);
             }
         }
@@ -919,7 +916,6 @@ impl NormalAccumulator {
                 for (x, d) in row.iter_mut().zip(&self.prior_deriv) {
                     *x = d[q];
                 }
-                sums.energy += r * r;
                 sums.add_row(&row[..k], *r);
             }
         }

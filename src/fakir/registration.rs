@@ -1501,11 +1501,10 @@ fn examine_support(
 /// folded the forearm back along the stump and laid the hand, without a point, on the chest
 /// (covered there): nothing was found lost; now the forearm and hand are (`synth --seed 300
 /// --rigid --height 1.7 --cut bone:l_upper_arm@0.5`, 30k points). Support alone is not
-/// enough: on real scans a fitted bone
-/// thicker than a draped limb, a foot on a plinth set aside, or a hand that FAKIR shrank,
-/// has little coverage but points of its own that nothing else explains (measured on
-/// `../shared/data`: the feet of Theodoric, Zenobia and Maria, the Faun's left arm and
-/// hand). **Laid over its parent** (our choice): a last bone (a hand, a foot) without
+/// enough: on real scans a fitted bone thicker than a draped limb, a foot on a plinth set
+/// aside, or a hand that FAKIR shrank, has little coverage but points of its own that
+/// nothing else explains (measured on `../shared/data`: the feet of Theodoric, Zenobia and
+/// Maria, the Faun's left arm and hand). **Laid over its parent** (our choice): a last bone (a hand, a foot) without
 /// support, whose mirror has support, and whose points its parent would explain as well if
 /// it reached to that bone's end ([`Solver::removal_excess_with`]: the parent from its first
 /// joint to the last bone's end, with its own radii, under the same bound), is lost. Below a
