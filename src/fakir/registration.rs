@@ -1507,25 +1507,25 @@ fn examine_support(
 /// in the other bones ([`buried_depth`] under [`THROUGH_DEPTH`] of its radius), and so is
 /// every bone below it (the whole limb below is then kept). A forearm resting on a thigh and
 /// a hand on the knee keep their surface in the scan, but the thigh takes most of their
-/// points: on seed 306
-/// (cut through the left shin at 0.6) the healthy left forearm and hand held 142 points
-/// against their mirrors' 1,995 and were taken lost with the foot (forearm coverage and reach
-/// 1, its axis 0.87 radii deep on average: the synthetic arm sinks into the thigh); on seed
-/// 311 (right shin at 0.5) the left forearm, not starved, 0.38 deep. A cut limb that FAKIR
-/// laid into the trunk is covered from end to end too, but its axis lies deep inside: seed
-/// 47's forearm (right upper arm cut at 0.3) 3.6 radii, seed 317's (the same cut) 2.4, so
-/// they stay lost; and so does the upper arm above them, whose stump FAKIR had laid along
-/// the trunk (0.75 radii deep: kept alone, the forearm completed below it lay on the trunk).
-/// The removal excess does not tell them apart (0.06 and 0.16 of the radius
+/// points: on seed 306 (cut through the left shin at 0.6) the healthy left forearm and hand
+/// held 142 points against their mirrors' 1,995 and were taken lost with the foot (forearm
+/// coverage and reach 1, its axis 0.87 radii deep on average: the synthetic arm sinks into
+/// the thigh); on seed 311 (right shin at 0.5) the left forearm, not starved, 0.38 deep. A
+/// cut limb that FAKIR laid into the trunk is covered from end to end too, but its axis lies
+/// deep inside: seed 47's forearm (right upper arm cut at 0.3) 3.6 radii, seed 317's (the
+/// same cut) 2.4, so they stay lost; and so does the upper arm above them, whose stump FAKIR
+/// had laid along the trunk (0.75 radii deep: kept alone, the forearm completed below it lay
+/// on the trunk). The removal excess does not tell them apart (0.06 and 0.16 of the radius
 /// for the resting forearms, 0.044 and 0.010 for the buried ones). The reach keeps a limb
 /// folded back onto its stump lost (seed 300's forearm: reach 0.1). Support alone is not
 /// enough: on real scans a fitted bone thicker than a draped limb, a foot on a plinth set
 /// aside, or a hand that FAKIR shrank, has little coverage but points of its own that
 /// nothing else explains (measured on `../shared/data`: the feet of Theodoric, Zenobia and
-/// Maria, the Faun's left arm and hand). **Laid over its parent** (our choice): a last bone (a hand, a foot) without
-/// support, whose mirror has support, and whose points its parent would explain as well if
-/// it reached to that bone's end ([`Solver::removal_excess_with`]: the parent from its first
-/// joint to the last bone's end, with its own radii, under the same bound), is lost. Below a
+/// Maria, the Faun's left arm and hand). **Laid over its parent** (our choice): a last bone
+/// (a hand, a foot) without support, whose mirror has support, and whose points its parent
+/// would explain as well if it reached to that bone's end ([`Solver::removal_excess_with`]:
+/// the parent from its first joint to the last bone's end, with its own radii, under the
+/// same bound), is lost. Below a
 /// cut at the wrist FAKIR can shorten the forearm and lay the hand over the forearm's far
 /// half: the hand is covered, has no support at its expected size, and its points are far
 /// from the shortened forearm's end, so the redundancy test kept it (seed 98: forearm 0.185
@@ -1696,7 +1696,10 @@ pub const THROUGH_DEPTH: f32 = 1.5;
 /// How deep bone `b`'s axis lies inside the other bones (those not below it and not
 /// `lost`), in `b`'s mean radii: the mean, over 9 points evenly spaced along the axis
 /// (a tenth to nine tenths), of the smallest signed distance to those bones, negated
-/// (positive inside, negative outside; 0 when there is no other bone).
+/// (positive inside, negative outside; 0 when there is no other bone). The exact signed
+/// distance ([`PreparedBone::signed_distance`]), not [`crate::geometry::bone::nearest_bone`]'s
+/// `sdf_fast`, which only bounds the depth inside from below ([`THROUGH_DEPTH`] was measured
+/// with the exact one).
 fn buried_depth(s: &Solver, b: usize, lost: &[bool]) -> f32 {
     let t = &s.world.template;
     let below = t.subtree(b);
