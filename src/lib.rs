@@ -22,7 +22,7 @@
 //! | [`kiosk`] | the Bevy kiosk: plugins over the core (loading, incremental FAKIR, animation, splats, gestures, attract mode, UI) |
 //! | [`render`] | a software point-cloud renderer ([`render::render`]: splats, z-buffer, eye-dome lighting), [`render::Camera`], overlays, PNG output ([`render::Image`]) |
 //! | [`synth`] | synthetic statues with ground truth (tests and benches) |
-//! | [`bench`] | the `pygmalion bench` harness |
+//! | [`mod@bench`] | the `pygmalion bench` harness |
 //!
 //! The core uses only `bevy::math` (glam) from Bevy; the kiosk ([`kiosk`]) is a set of Bevy
 //! plugins over it and the CLI (`src/main.rs`, [`cli`]) a thin wrapper.

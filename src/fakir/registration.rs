@@ -19,7 +19,7 @@
 //!    **Facing check** (our choice; skipped with a facing hint or a given skeleton): the
 //!    winner is turned around ([`WorldSkeleton::turned_around`]: the same limbs with left
 //!    and right exchanged, the trunk facing the other way) and registered again on the same
-//!    points; the finalists' rule decides between the two ([`preferred`]). A human seen from
+//!    points; the finalists' rule decides between the two (`preferred`). A human seen from
 //!    the front or the back is nearly the same surface, so the two facings' scores are close
 //!    and a fit can settle facing backwards; facing the wrong way its knees, elbows and feet
 //!    bend outside their ranges.
@@ -71,7 +71,7 @@
 //!    one: seed 47 cut through the right thigh, told its up, scored 0.0175 after the refit
 //!    rounds, against 0.0393 for the upside-down fit kept and 0.052 for the flipped
 //!    finalist registered again. So the check goes on: the other up direction is searched
-//!    as a given up hint is ([`FullRun::search_up`]: the placements about it, their short
+//!    as a given up hint is (`FullRun::search_up`: the placements about it, their short
 //!    registrations, the best `finalists` at level 0), and the finalists' rule's pick is
 //!    registered again through level 1 and the refit rounds; it too wins with the lower
 //!    score. Over the same 12 statues (joints the scan has): seed 47 46.7% → 4.1%, seed 68
@@ -239,7 +239,7 @@
 //!    forearm over the hand, its far end on the true hand's tip, and leave the hand beside
 //!    it, off the statue or on points the forearm explains as well — level 6 then finds a
 //!    hand lost on a complete statue. Trigger: the last bone of a limb chain that the
-//!    lost-limb rules of level 6 ([`lost_limbs`], run here on the current fit) would take,
+//!    lost-limb rules of level 6 (`lost_limbs`, run here on the current fit) would take,
 //!    at full size (not shrunk: FAKIR shrinks the bones of a limb cut at the wrist onto the
 //!    stump), below a bone neither lost nor under `MISSING` coverage; or below a bone that
 //!    is not lost but collapsed and under `MISSING` coverage, an arm folded up on itself
@@ -286,8 +286,8 @@
 //!    all lost is lost when its subtree is redundant (its points lie almost as close to the
 //!    other bones; more loosely so when it is starved, with a quarter of the points of its
 //!    mirror's subtree) or when it is bare (no support and no points of its own:
-//!    [`lost_limbs`]). A hand or foot laid over its parent is lost too, and one whose mirror
-//!    was taken lost is examined again (both hands or both feet broken: [`lost_limbs`]).
+//!    `lost_limbs`). A hand or foot laid over its parent is lost too, and one whose mirror
+//!    was taken lost is examined again (both hands or both feet broken: `lost_limbs`).
 //!    Lost bones get the expected size and pose of the thesis' ch. 5 (the healthy mirror
 //!    limb's, else the template's), take no points, and the rest of the skeleton is refined
 //!    without them (`final_iterations` whole-skeleton iterations, each limb fitted up to
@@ -518,7 +518,7 @@ pub struct Fit {
     pub candidate_distances: Vec<f64>,
     /// Support of every bone (level 6; empty when `missing` detection is off).
     pub support: Vec<BoneSupport>,
-    /// Bones of lost limbs ([`lost_limbs`]), completed to their expected size and pose; no
+    /// Bones of lost limbs (`lost_limbs`), completed to their expected size and pose; no
     /// point is labelled with them.
     pub missing: Vec<bool>,
 }
@@ -1686,11 +1686,11 @@ fn covered_through(support: &BoneSupport) -> bool {
     support.coverage >= super::support::PARTIAL && support.reach >= THROUGH_REACH
 }
 
-/// The reach from which a bone counts as covered from end to end ([`covered_through`]).
+/// The reach from which a bone counts as covered from end to end (`covered_through`).
 pub const THROUGH_REACH: f32 = 0.9;
 
-/// The depth (in the bone's mean radii, [`buried_depth`]) from which a bone covered through
-/// is buried in the other bones and stays lost ([`lost_limbs`]).
+/// The depth (in the bone's mean radii, `buried_depth`) from which a bone covered through
+/// is buried in the other bones and stays lost (`lost_limbs`).
 pub const THROUGH_DEPTH: f32 = 1.5;
 
 /// How deep bone `b`'s axis lies inside the other bones (those not below it and not
@@ -1726,20 +1726,20 @@ fn buried_depth(s: &Solver, b: usize, lost: &[bool]) -> f32 {
     depth / 9.0 / radius.max(f32::MIN_POSITIVE)
 }
 
-/// A last bone laid over its parent ([`lost_limbs`]) is only lost when the two together are
+/// A last bone laid over its parent (`lost_limbs`) is only lost when the two together are
 /// shorter than this fraction of their mirrors.
 pub const OVER_PARENT_SHORTER: f32 = 0.8;
 
 /// A subtree whose removal costs its points less than this fraction of the bone's mean
-/// radius on average is redundant ([`lost_limbs`]).
+/// radius on average is redundant (`lost_limbs`).
 pub const REDUNDANT: f64 = 0.25;
 
 /// A limb subtree holding fewer than this fraction of the points its mirror's subtree holds
-/// is **starved** ([`lost_limbs`]).
+/// is **starved** (`lost_limbs`).
 pub const STARVED: f64 = 0.25;
 
 /// The redundancy bound (a fraction of the bone's mean radius, like [`REDUNDANT`]) of a
-/// starved subtree ([`lost_limbs`]).
+/// starved subtree (`lost_limbs`).
 pub const STARVED_REDUNDANT: f64 = 0.5;
 
 /// Level 6: the lost bones (`missing`) are given their expected size and pose

@@ -41,7 +41,7 @@
 //!
 //! **Pose pictograms.** Each pose button shows a small picture of the pose above its label:
 //! the active statue's template in that pose, drawn from the pose data by the bevy-free
-//! [`crate::render::pictogram`] ([`POSE_ICON_PX`], three-quarter view, transparent
+//! [`mod@crate::render::pictogram`] ([`POSE_ICON_PX`], three-quarter view, transparent
 //! background) and turned into a Bevy `Image`. A pose file a museum adds to the strip gets its
 //! pictogram with no further work; a pose that does not fit the template gets none (logged).
 //! The pictograms are redrawn when the carousel brings a statue of another template.

@@ -75,7 +75,7 @@
 //! * Pictures are PNG files written by the tiny encoder of [`png`] (stored deflate blocks; no
 //!   dependency).
 //!
-//! [`pictogram`] draws a different kind of picture: a small RGBA icon of a skeleton's
+//! [`mod@pictogram`] draws a different kind of picture: a small RGBA icon of a skeleton's
 //! sphere-mesh figure in a pose (the kiosk's pose buttons), analytically from the bones rather
 //! than from points.
 

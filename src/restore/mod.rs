@@ -11,8 +11,8 @@
 //! | stage | module |
 //! |---|---|
 //! | which bones are there: support, missing and partial bones, completion (measured by the registration) | [`crate::fakir::support`] |
-//! | a donor's part re-proportioned and re-posed onto the target | [`transfer`] |
-//! | the overlap merged to a single layer (eq. 5.1) | [`merge`] |
+//! | a donor's part re-proportioned and re-posed onto the target | [`mod@transfer`] |
+//! | the overlap merged to a single layer (eq. 5.1) | [`mod@merge`] |
 //! | the whole restoration, with provenance | [`restore`] (this module) |
 //! | one part at a time (the kiosk's part swapping): donor check, assembly with provenance | [`check_donor`], [`Assembly`] |
 
@@ -346,7 +346,7 @@ impl Assembly {
     }
 
     /// Appends a transferred part (its points labelled `source`, with their donor bones) and
-    /// merges the overlap around the part's joint on `skeleton` (eq. 5.1, [`merge`]).
+    /// merges the overlap around the part's joint on `skeleton` (eq. 5.1, [`mod@merge`]).
     pub fn add(
         &mut self,
         skeleton: &Skeleton,

@@ -16,7 +16,7 @@
 //! **The base** ([`Binding::with_base`]; our addition): the points of the statue's plinth
 //! ([`crate::cloud::base`]) are bound like the others, so the arrays stay one per point, but
 //! every deformation then puts them back where they stood, moved only by the root's rigid
-//! placement ([`Binding::place_base`]): a plinth neither bends with the feet nor follows a
+//! placement (`Binding::place_base`): a plinth neither bends with the feet nor follows a
 //! change of proportions.
 //!
 //! **Influence size** `ε'_r` of the joint between `B_p` and `B_k` (thesis §3.2.1):
