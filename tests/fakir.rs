@@ -2144,6 +2144,26 @@ fn a_forearm_resting_on_the_thigh_is_not_taken_lost() {
     })
 }
 
+#[test]
+fn a_fit_far_from_its_points_is_searched_again_about_tilted_ups() {
+    // `synth --seed 303 --rigid --height 1.7 --cut bone:r_thigh@0.7` (30k points, held out
+    // while the lost-limb rules were built). The placements align the template's long axis
+    // with the cloud's, and this figure's trunk lies 34° from it: the fit ended with its trunk
+    // tilted that far and its left arm and pelvis off (7.50% of the height in joint error over
+    // the joints the scan has), its mean distance 0.70% of its size. The tilted-up check
+    // (registration, level 5) searches four ups 30° from the fit's own: 0.77%, the shin and
+    // foot below the cut found lost. The guard at 2%.
+    on_one_thread(|| {
+        let s = cut_human(303, 30_000, &[("r_thigh", 0.7)]);
+        let fit = register_as_the_cli(&s);
+        assert_eq!(fit.missing_names(), ["r_shin", "r_foot"], "seed 303");
+        let below = ["r_knee", "r_ankle", "r_toe"];
+        let err = joint_error_without(&fit.skeleton, &s.truth, &below, 1.7, false);
+        println!("seed 303: joint error {:.2}%", 100.0 * err);
+        assert!(err < 0.02, "seed 303: joint error {err}");
+    })
+}
+
 /// Registers `seed` cut at `cut` as the CLI does: the joints the scan has (those below the cut
 /// thigh left out) within `bound` of the height, and the fit upright (its pelvis-to-neck
 /// direction within 30° of the truth's).
