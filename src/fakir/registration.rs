@@ -957,65 +957,34 @@ fn register_here(
         // Then the other up searched as if it were given: its placements (appended to
         // `cands`), their short registrations, the best `finalists` registered at level 0;
         // the finalists' rule picks the start, refined like the fit.
-        if let Some(hook) = s.take_pause() {
-            let mut at = s.activity.fraction;
-            let (more, mut fits) = full.search_up(
-                &template,
-                &level0_points,
-                &[-up],
-                cands.len(),
-                hook,
-                &mut at,
-                (a, b),
-            )?;
-            s.give_pause(hook);
-            cands.extend(more);
-            if !fits.is_empty() {
-                let g = fits.swap_remove(preferred(&fits));
-                let c = full.start_at(&g.world, g.scale);
-                let before = s.world.up();
-                s = full.challenge(s, &ch, (&c, (b, hi)), &mut iterations, lower)?;
-                // The fit now comes from that placement when it won.
-                if s.world.up() != before {
-                    candidate = g.candidate;
-                }
-            }
-        }
+        s = full.challenge_about(
+            s,
+            &ch,
+            (&template, &level0_points, &[-up]),
+            &mut cands,
+            (a, b, hi),
+            &mut iterations,
+            &mut candidate,
+        )?;
     }
     // The tilted-up check (see the module docs): a fit still far from its points is searched
     // again about ups tilted from its own; the lower score wins.
-    if tilt
-        && s.mean_distance() > POOR_FIT * size as f64
-        && let Some(hook) = s.take_pause()
-    {
+    if tilt && s.mean_distance() > POOR_FIT * size as f64 {
         let (lo, hi) = check_span(1);
-        let mid = 0.5 * (lo + hi);
         let up = s.world.up();
         let ups: Vec<Vec3> = [Vec3::X, Vec3::NEG_X, Vec3::Z, Vec3::NEG_Z]
             .iter()
             .map(|a| Quat::from_axis_angle(s.world.root_rotation * *a, TILT.to_radians()) * up)
             .collect();
-        let mut at = s.activity.fraction;
-        let (more, mut fits) = full.search_up(
-            &template,
-            &level0_points,
-            &ups,
-            cands.len(),
-            hook,
-            &mut at,
-            (lo, mid),
+        s = full.challenge_about(
+            s,
+            &ch,
+            (&template, &level0_points, &ups),
+            &mut cands,
+            (lo, 0.5 * (lo + hi), hi),
+            &mut iterations,
+            &mut candidate,
         )?;
-        s.give_pause(hook);
-        cands.extend(more);
-        if !fits.is_empty() {
-            let g = fits.swap_remove(preferred(&fits));
-            let c = full.start_at(&g.world, g.scale);
-            let before = s.world.up();
-            s = full.challenge(s, &ch, (&c, (mid, hi)), &mut iterations, lower)?;
-            if s.world.up() != before {
-                candidate = g.candidate;
-            }
-        }
     }
     // The second facing check (see the module docs): the turned fit wins with both the
     // lower score and the lower implausibility.
@@ -1371,6 +1340,44 @@ impl FullRun<'_> {
             s.units = t.units;
             s.activity.fraction = fraction;
             s.give_pause(hook);
+        }
+        Ok(s)
+    }
+
+    /// A search about the ups `ups` ([`FullRun::search_up`] on `points`, progress in the first
+    /// part of `progress` = `(lo, mid, hi)`) whose pick by the finalists' rule challenges the
+    /// fit `s` (progress in the second part) and wins with the lower score: the up-down and
+    /// tilted-up checks (level 5 in the module docs). The placements are appended to `cands`,
+    /// and `candidate` becomes the pick's when it won.
+    #[allow(clippy::too_many_arguments)]
+    fn challenge_about<'p>(
+        &self,
+        mut s: Solver<'p>,
+        ch: &Challenge,
+        (template, points, ups): (&Arc<Template>, &[Vec3], &[Vec3]),
+        cands: &mut Vec<Candidate>,
+        (lo, mid, hi): (f32, f32, f32),
+        iterations: &mut usize,
+        candidate: &mut usize,
+    ) -> Result<Solver<'p>> {
+        let Some(hook) = s.take_pause() else {
+            return Ok(s);
+        };
+        let mut at = s.activity.fraction;
+        let (more, mut fits) =
+            self.search_up(template, points, ups, cands.len(), hook, &mut at, (lo, mid))?;
+        s.give_pause(hook);
+        cands.extend(more);
+        if !fits.is_empty() {
+            let g = fits.swap_remove(preferred(&fits));
+            let c = self.start_at(&g.world, g.scale);
+            let before = s.world.up();
+            let lower = |kept: f64, other: f64, _: &WorldSkeleton| other < kept;
+            s = self.challenge(s, ch, (&c, (mid, hi)), iterations, lower)?;
+            // The fit now comes from that placement when it won.
+            if s.world.up() != before {
+                *candidate = g.candidate;
+            }
         }
         Ok(s)
     }
