@@ -2112,13 +2112,12 @@ fn a_cut_limb_whose_hand_holds_no_point_is_found_lost() {
     // ("empty", `lost_limbs`): the forearm and the hand are (0.61% of the height in joint
     // error over the joints the scan has). The guard at 2%.
     on_one_thread(|| {
-        let s = cut_human(300, 30_000, &[("l_upper_arm", 0.5)]);
-        let fit = register_as_the_cli(&s);
-        assert_eq!(fit.missing_names(), ["l_forearm", "l_hand"], "seed 300");
-        let below = ["l_elbow", "l_wrist", "l_hand_tip"];
-        let err = joint_error_without(&fit.skeleton, &s.truth, &below, 1.7, false);
-        println!("seed 300: joint error {:.2}%", 100.0 * err);
-        assert!(err < 0.02, "seed 300: joint error {err}");
+        held_out_cut(
+            300,
+            ("l_upper_arm", 0.5),
+            &["l_forearm", "l_hand"],
+            &["l_elbow", "l_wrist", "l_hand_tip"],
+        )
     })
 }
 
@@ -2133,15 +2132,7 @@ fn a_forearm_resting_on_the_thigh_is_not_taken_lost() {
     // trunk: 2.4 to 3.6, seeds 47 and 317), so it and the hand are kept ("covered through",
     // `lost_limbs`): the foot alone is lost (0.91% of the height in joint error over the
     // joints the scan has, 1.54% before). The guard at 2%.
-    on_one_thread(|| {
-        let s = cut_human(306, 30_000, &[("l_shin", 0.6)]);
-        let fit = register_as_the_cli(&s);
-        assert_eq!(fit.missing_names(), ["l_foot"], "seed 306");
-        let below = ["l_ankle", "l_toe"];
-        let err = joint_error_without(&fit.skeleton, &s.truth, &below, 1.7, false);
-        println!("seed 306: joint error {:.2}%", 100.0 * err);
-        assert!(err < 0.02, "seed 306: joint error {err}");
-    })
+    on_one_thread(|| held_out_cut(306, ("l_shin", 0.6), &["l_foot"], &["l_ankle", "l_toe"]))
 }
 
 #[test]
@@ -2154,14 +2145,25 @@ fn a_fit_far_from_its_points_is_searched_again_about_tilted_ups() {
     // (registration, level 5) searches four ups 30° from the fit's own: 0.77%, the shin and
     // foot below the cut found lost. The guard at 2%.
     on_one_thread(|| {
-        let s = cut_human(303, 30_000, &[("r_thigh", 0.7)]);
-        let fit = register_as_the_cli(&s);
-        assert_eq!(fit.missing_names(), ["r_shin", "r_foot"], "seed 303");
-        let below = ["r_knee", "r_ankle", "r_toe"];
-        let err = joint_error_without(&fit.skeleton, &s.truth, &below, 1.7, false);
-        println!("seed 303: joint error {:.2}%", 100.0 * err);
-        assert!(err < 0.02, "seed 303: joint error {err}");
+        held_out_cut(
+            303,
+            ("r_thigh", 0.7),
+            &["r_shin", "r_foot"],
+            &["r_knee", "r_ankle", "r_toe"],
+        )
     })
+}
+
+/// A held-out cut statue (`synth --seed SEED --rigid --height 1.7 --cut bone:B@F`, 30k
+/// points) registered as the CLI does: the lost set exactly `lost`, and the joints the scan
+/// has (`below`, the joints below the cut, left out) within 2% of the height.
+fn held_out_cut(seed: u64, cut: (&str, f32), lost: &[&str], below: &[&str]) {
+    let s = cut_human(seed, 30_000, &[cut]);
+    let fit = register_as_the_cli(&s);
+    assert_eq!(fit.missing_names(), lost, "seed {seed}");
+    let err = joint_error_without(&fit.skeleton, &s.truth, below, 1.7, false);
+    println!("seed {seed}: joint error {:.2}%", 100.0 * err);
+    assert!(err < 0.02, "seed {seed}: joint error {err}");
 }
 
 /// Registers `seed` cut at `cut` as the CLI does: the joints the scan has (those below the cut
