@@ -1212,6 +1212,17 @@ fn register_with(
     .unwrap()
 }
 
+/// `synth --seed SEED --rigid --height 1.7` with `points` points ([`posed_human`]) registered
+/// as the CLI does: asserts its joint error under `limit` of the height, left and right not
+/// exchanged ([`unswapped_joint_error`]); returns the fit.
+fn posed_fit_within(seed: u64, points: usize, limit: f32) -> pygmalion::fakir::Fit {
+    let s = posed_human(seed, points);
+    let fit = register_as_the_cli(&s);
+    let err = unswapped_joint_error(&fit.skeleton, &s.truth, &format!("seed {seed}"));
+    assert!(err < limit, "seed {seed}: joint error {err}");
+    fit
+}
+
 /// Joint error of a fit of a 1.7-high statue (printed with its mirrored error), asserting
 /// that left and right are not exchanged.
 fn unswapped_joint_error(fit: &Skeleton, truth: &Skeleton, what: &str) -> f32 {
@@ -1860,10 +1871,7 @@ fn facing_registration() {
     // the fit turned around by the facing check scoring lower and bending its joints within
     // their ranges.
     for (seed, limit) in [(30u64, 0.04f32), (49, 0.02)] {
-        let s = posed_human(seed, 6_000);
-        let fit = register_as_the_cli(&s);
-        let err = unswapped_joint_error(&fit.skeleton, &s.truth, &format!("seed {seed}"));
-        assert!(err < limit, "seed {seed}: joint error {err}");
+        posed_fit_within(seed, 6_000, limit);
     }
 }
 
@@ -1879,10 +1887,7 @@ fn second_facing_registration() {
     // 0.0184; the first facing check had its turned fit score 0.0411 against 0.0268, just
     // outside the near-ties. Turned around after the refits it scores 0.0103 and ends at
     // 0.73%.
-    let s = posed_human(14, 30_000);
-    let fit = register_as_the_cli(&s);
-    let err = unswapped_joint_error(&fit.skeleton, &s.truth, "seed 14");
-    assert!(err < 0.02, "seed 14: joint error {err}");
+    posed_fit_within(14, 30_000, 0.02);
 }
 
 #[test]
@@ -2208,10 +2213,7 @@ fn crossed_registration() {
     // Without the crossed-limbs check each thigh ran from its hip to the other knee: joint
     // error 8.8% of the height. Registered again with the legs exchanged below the thighs,
     // it ends at 1.8%, with no crossed pair.
-    let s = posed_human(64, 30_000);
-    let fit = register_as_the_cli(&s);
-    let err = unswapped_joint_error(&fit.skeleton, &s.truth, "seed 64");
-    assert!(err < 0.025, "seed 64: joint error {err}");
+    let fit = posed_fit_within(64, 30_000, 0.025);
     let t = &fit.skeleton.template;
     let w = WorldSkeleton::from_skeleton(&fit.skeleton);
     let crossed = w.most_crossed(&t.mirror_bones(), &vec![false; t.bones.len()]);
@@ -2305,10 +2307,7 @@ fn folded_registration() {
     // Without the folded-limbs check the right upper arm ran from the shoulder to the hand
     // and the forearm folded back along it (172°): joint error 3.3% of the height.
     // Registered again with the arm laid straight, it ends at 0.96%, folded nowhere.
-    let s = posed_human(12, 30_000);
-    let fit = register_as_the_cli(&s);
-    let err = unswapped_joint_error(&fit.skeleton, &s.truth, "seed 12");
-    assert!(err < 0.015, "seed 12: joint error {err}");
+    let fit = posed_fit_within(12, 30_000, 0.015);
     let t = &fit.skeleton.template;
     let w = WorldSkeleton::from_skeleton(&fit.skeleton);
     let folded = w.most_folded(&trunk_bones(t), FOLDED.to_radians());
@@ -2385,10 +2384,7 @@ fn squeezed_registration() {
     // starting wide enough to cover the hips (so the uncovered-thigh trigger did not fire),
     // the neck and head squeezed to 0.43 of their share of the trunk chain: joint error
     // 3.76% of the height. Slid down, it ends at 1.42%.
-    let s = posed_human(6, 39_000);
-    let fit = register_as_the_cli(&s);
-    let err = unswapped_joint_error(&fit.skeleton, &s.truth, "seed 6");
-    assert!(err < 0.02, "seed 6: joint error {err}");
+    let fit = posed_fit_within(6, 39_000, 0.02);
     let share = WorldSkeleton::from_skeleton(&fit.skeleton)
         .trunk_end_share()
         .unwrap();
@@ -2448,10 +2444,7 @@ fn slid_registration() {
     // and the left leg a bone up its own length (the knee at the hip, the ankle at the knee):
     // both thighs uncovered at the hip, joint error 3.7% of the height. Slid down, the block
     // first and then the left leg, it ends at 0.43%.
-    let s = posed_human(31, 30_000);
-    let fit = register_as_the_cli(&s);
-    let err = unswapped_joint_error(&fit.skeleton, &s.truth, "seed 31");
-    assert!(err < 0.01, "seed 31: joint error {err}");
+    let fit = posed_fit_within(31, 30_000, 0.01);
     for name in ["l_thigh", "r_thigh"] {
         let b = fit.skeleton.template.bone_index(name).unwrap();
         let reach = fit.support[b].reach;
@@ -2925,10 +2918,7 @@ fn a_fit_with_an_arm_slid_one_joint_in_is_registered_again_slid_out() {
         // check the left arm sat one joint in (the elbow on the shoulder, the wrist on the
         // elbow) with the hand stretched over the forearm: joint error 2.2% of the height.
         // Slid out, it ends at 0.31%.
-        let s = posed_human(43, 30_000);
-        let fit = register_as_the_cli(&s);
-        let err = unswapped_joint_error(&fit.skeleton, &s.truth, "seed 43");
-        assert!(err < 0.01, "seed 43: joint error {err}");
+        let fit = posed_fit_within(43, 30_000, 0.01);
         let w = WorldSkeleton::from_skeleton(&fit.skeleton);
         let none = vec![false; fit.skeleton.bones.len()];
         assert_eq!(w.most_stretched_end(&none, STRETCHED_END), None);
