@@ -8,7 +8,7 @@ use crate::error::Result;
 use crate::fakir::solver::{Cancelled, Pause, Solver};
 use crate::fakir::{Fit, Init, Registration, RegistrationOptions, register};
 use crate::math::Quat;
-use crate::synth::{SynthOptions, SynthStatue, chain4, generate};
+use crate::synth::{Cut, SynthOptions, SynthStatue, chain4, generate};
 use std::sync::Arc;
 
 pub(super) fn entries() -> Vec<Entry> {
@@ -40,6 +40,10 @@ pub(super) fn entries() -> Vec<Entry> {
         Entry {
             name: "fakir/accuracy_posed",
             run: accuracy_posed,
+        },
+        Entry {
+            name: "fakir/accuracy_cuts",
+            run: accuracy_cuts,
         },
     ]
 }
@@ -349,6 +353,118 @@ fn accuracy_posed(_runs: usize) -> Result<BenchResult> {
     );
     r.extra.insert("left_right_swaps".into(), swaps as f64);
     Ok(r)
+}
+
+/// The held-out cut statues: seed, the bone cut and where along it (0 at its first joint).
+/// They were kept out while the lost-limb rules (level 6 of the registration) were built.
+const HELD_OUT_CUTS: [(u64, &str, f32); 20] = [
+    (300, "l_upper_arm", 0.5),
+    (301, "r_upper_arm", 0.7),
+    (302, "l_thigh", 0.3),
+    (303, "r_thigh", 0.7),
+    (304, "l_shin", 0.2),
+    (305, "r_shin", 0.3),
+    (306, "l_shin", 0.6),
+    (307, "r_forearm", 0.3),
+    (308, "l_forearm", 0.6),
+    (309, "r_hand", 0.5),
+    (310, "l_forearm", 0.4),
+    (311, "r_shin", 0.5),
+    (312, "l_hand", 0.3),
+    (313, "r_thigh", 0.5),
+    (314, "l_upper_arm", 0.8),
+    (315, "r_forearm", 0.8),
+    (316, "l_foot", 0.5),
+    (317, "r_upper_arm", 0.3),
+    (318, "l_shin", 0.8),
+    (319, "l_thigh", 0.6),
+];
+
+/// Lost-limb detection and accuracy on broken statues: the 20 held-out cut statues
+/// ([`HELD_OUT_CUTS`]; `synth --seed N --rigid --height 1.7 --cut bone:B@F`, 30k points before
+/// the cut, statue-like poses, ±30% proportions), each registered once with `register`'s
+/// defaults. A statue's lost set is **right** when the fit's missing bones are exactly the
+/// bones below the cut one (the cut bone itself is partial, not lost); its joint error is
+/// taken over the joints the scan has (those at the far end of the cut bone and below it left
+/// out), as a share of the height. `extra`: how many lost sets are right, how many statues
+/// are under 2%, the median joint error, and per seed `seed<N>.right` (1 or 0) and
+/// `seed<N>.joint_error_pct`. The timing columns are the per-statue registration times.
+fn accuracy_cuts(_runs: usize) -> Result<BenchResult> {
+    let t = Arc::new(Template::builtin("human")?);
+    let (mut errors, mut times) = (Vec::new(), Vec::new());
+    let mut extra = std::collections::BTreeMap::new();
+    let (mut right, mut points) = (0usize, 0u64);
+    for (seed, bone, at) in HELD_OUT_CUTS {
+        let statue = generate(
+            t.clone(),
+            &SynthOptions {
+                points: 30_000,
+                seed,
+                rigid: true,
+                random_pose: true,
+                proportion_jitter: 0.3,
+                height: 1.7,
+                cuts: vec![Cut::Bone {
+                    bone: bone.to_string(),
+                    at,
+                }],
+                ..Default::default()
+            },
+        )?;
+        points += statue.cloud.len() as u64;
+        let start = std::time::Instant::now();
+        let fit = Registration::new(
+            Arc::new(statue.cloud.clone()),
+            t.clone(),
+            RegistrationOptions::default(),
+        )?
+        .run_to_convergence()?;
+        times.push(start.elapsed().as_secs_f64());
+        let cut = t.bone_index(bone).expect("a bone of the human template");
+        let below = t.subtree(cut);
+        let lost: Vec<&str> = (0..t.bones.len())
+            .filter(|&b| b != cut && below.contains(&b))
+            .map(|b| t.bones[b].name.as_str())
+            .collect();
+        let ok = fit.missing_names() == lost;
+        right += ok as usize;
+        // The joints the scan has: none at the far end of the cut bone or below it.
+        let (fj, tj) = (fit.skeleton.pose().joints, statue.truth.pose().joints);
+        let ends: Vec<_> = below
+            .iter()
+            .map(|&b| statue.truth.pose().bones[b].c2)
+            .collect();
+        let kept: Vec<usize> = (0..tj.len())
+            .filter(|&j| ends.iter().all(|e| (*e - tj[j]).length() > 1e-6))
+            .collect();
+        let err = kept.iter().map(|&j| (fj[j] - tj[j]).length()).sum::<f32>()
+            / kept.len().max(1) as f32
+            / 1.7;
+        errors.push(100.0 * err as f64);
+        extra.insert(format!("seed{seed}.right"), if ok { 1.0 } else { 0.0 });
+        extra.insert(format!("seed{seed}.joint_error_pct"), 100.0 * err as f64);
+    }
+    let sorted = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v
+    };
+    let (sorted_errors, times) = (sorted(errors.clone()), sorted(times));
+    let q = |v: &[f64], f: f64| v[((v.len() - 1) as f64 * f).round() as usize];
+    extra.insert("lost_right".into(), right as f64);
+    extra.insert(
+        "under_2pct".into(),
+        errors.iter().filter(|e| **e < 2.0).count() as f64,
+    );
+    extra.insert("median_joint_error_pct".into(), q(&sorted_errors, 0.5));
+    Ok(BenchResult {
+        name: "fakir/accuracy_cuts".into(),
+        n: points / HELD_OUT_CUTS.len() as u64,
+        runs: times.len(),
+        median_s: q(&times, 0.5),
+        min_s: times[0],
+        max_s: times[times.len() - 1],
+        extra,
+    })
 }
 
 /// Mean joint distance with the fit's left and right exchanged (`l_…` ↔ `r_…`).
