@@ -324,29 +324,10 @@ fn accuracy_posed(_runs: usize) -> Result<BenchResult> {
         }
         errors.push(100.0 * err as f64);
     }
-    let sorted = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v
-    };
-    let (errors, times) = (sorted(errors), sorted(times));
-    let q = |v: &[f64], f: f64| v[((v.len() - 1) as f64 * f).round() as usize];
-    let mut r = BenchResult {
-        name: "fakir/accuracy_posed".into(),
-        n: points / POPULATION,
-        runs: times.len(),
-        median_s: q(&times, 0.5),
-        min_s: times[0],
-        max_s: times[times.len() - 1],
-        extra: Default::default(),
-    };
+    let mut r = population("fakir/accuracy_posed", points / POPULATION, times, &errors);
+    let errors = sorted(errors);
     r.extra
-        .insert("median_joint_error_pct".into(), q(&errors, 0.5));
-    r.extra
-        .insert("p90_joint_error_pct".into(), q(&errors, 0.9));
-    r.extra.insert(
-        "under_2pct".into(),
-        errors.iter().filter(|e| **e < 2.0).count() as f64,
-    );
+        .insert("p90_joint_error_pct".into(), quantile(&errors, 0.9));
     r.extra.insert(
         "under_5pct".into(),
         errors.iter().filter(|e| **e < 5.0).count() as f64,
@@ -420,7 +401,11 @@ fn accuracy_cuts(_runs: usize) -> Result<BenchResult> {
         )?
         .run_to_convergence()?;
         times.push(start.elapsed().as_secs_f64());
-        let cut = t.bone_index(bone).expect("a bone of the human template");
+        let cut = t.bone_index(bone).ok_or_else(|| {
+            crate::error::Error::input(format!(
+                "accuracy_cuts: no bone '{bone}' in the human template"
+            ))
+        })?;
         let below = t.subtree(cut);
         let lost: Vec<&str> = (0..t.bones.len())
             .filter(|&b| b != cut && below.contains(&b))
@@ -444,27 +429,37 @@ fn accuracy_cuts(_runs: usize) -> Result<BenchResult> {
         extra.insert(format!("seed{seed}.right"), if ok { 1.0 } else { 0.0 });
         extra.insert(format!("seed{seed}.joint_error_pct"), 100.0 * err as f64);
     }
-    let sorted = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v
-    };
-    let (sorted_errors, times) = (sorted(errors.clone()), sorted(times));
-    let q = |v: &[f64], f: f64| v[((v.len() - 1) as f64 * f).round() as usize];
-    extra.insert("lost_right".into(), right as f64);
-    extra.insert(
+    let n = points / HELD_OUT_CUTS.len() as u64;
+    let mut r = population("fakir/accuracy_cuts", n, times, &errors);
+    r.extra.extend(extra);
+    r.extra.insert("lost_right".into(), right as f64);
+    Ok(r)
+}
+
+/// The figures of a population of registered statues: the timing columns from each statue's
+/// registration time (`times`), and in `extra` the median joint error and how many statues
+/// are under 2% of the height (`errors`, in % of the height).
+fn population(name: &str, n: u64, mut times: Vec<f64>, errors: &[f64]) -> BenchResult {
+    let mut r = super::summarise(name, n, &mut times);
+    let errors = sorted(errors.to_vec());
+    r.extra
+        .insert("median_joint_error_pct".into(), quantile(&errors, 0.5));
+    r.extra.insert(
         "under_2pct".into(),
         errors.iter().filter(|e| **e < 2.0).count() as f64,
     );
-    extra.insert("median_joint_error_pct".into(), q(&sorted_errors, 0.5));
-    Ok(BenchResult {
-        name: "fakir/accuracy_cuts".into(),
-        n: points / HELD_OUT_CUTS.len() as u64,
-        runs: times.len(),
-        median_s: q(&times, 0.5),
-        min_s: times[0],
-        max_s: times[times.len() - 1],
-        extra,
-    })
+    r
+}
+
+/// `v` sorted (ascending).
+fn sorted(mut v: Vec<f64>) -> Vec<f64> {
+    v.sort_by(f64::total_cmp);
+    v
+}
+
+/// The element at fraction `f` of the sorted `v` (nearest rank; not empty).
+fn quantile(v: &[f64], f: f64) -> f64 {
+    v[((v.len() - 1) as f64 * f).round() as usize]
 }
 
 /// Mean joint distance with the fit's left and right exchanged (`l_…` ↔ `r_…`).
