@@ -310,14 +310,7 @@ fn accuracy_posed(_runs: usize) -> Result<BenchResult> {
             },
         )?;
         points += statue.cloud.len() as u64;
-        let start = std::time::Instant::now();
-        let fit = Registration::new(
-            Arc::new(statue.cloud.clone()),
-            t.clone(),
-            RegistrationOptions::default(),
-        )?
-        .run_to_convergence()?;
-        times.push(start.elapsed().as_secs_f64());
+        let fit = register_timed(&statue, &mut times)?;
         let err = fit.skeleton.mean_joint_distance(&statue.truth) / 1.7;
         if mirrored_distance(&fit.skeleton, &statue.truth) / 1.7 < err {
             swaps += 1;
@@ -393,14 +386,7 @@ fn accuracy_cuts(_runs: usize) -> Result<BenchResult> {
             },
         )?;
         points += statue.cloud.len() as u64;
-        let start = std::time::Instant::now();
-        let fit = Registration::new(
-            Arc::new(statue.cloud.clone()),
-            t.clone(),
-            RegistrationOptions::default(),
-        )?
-        .run_to_convergence()?;
-        times.push(start.elapsed().as_secs_f64());
+        let fit = register_timed(&statue, &mut times)?;
         let cut = t.bone_index(bone).ok_or_else(|| {
             crate::error::Error::input(format!(
                 "accuracy_cuts: no bone '{bone}' in the human template"
@@ -434,6 +420,20 @@ fn accuracy_cuts(_runs: usize) -> Result<BenchResult> {
     r.extra.extend(extra);
     r.extra.insert("lost_right".into(), right as f64);
     Ok(r)
+}
+
+/// `statue` registered with `register`'s defaults, run to convergence; its wall time is
+/// pushed onto `times` (the population benchmarks' timing columns).
+fn register_timed(statue: &SynthStatue, times: &mut Vec<f64>) -> Result<Fit> {
+    let start = std::time::Instant::now();
+    let fit = Registration::new(
+        Arc::new(statue.cloud.clone()),
+        statue.truth.template.clone(),
+        RegistrationOptions::default(),
+    )?
+    .run_to_convergence()?;
+    times.push(start.elapsed().as_secs_f64());
+    Ok(fit)
 }
 
 /// The figures of a population of registered statues: the timing columns from each statue's
