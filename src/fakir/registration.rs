@@ -1615,13 +1615,38 @@ fn examine_support(
 /// without the hand reaches the cut (0.81% → 0.33%, 0.63% → 0.25%). Seed 123 without its feet
 /// reported the right one partial with no point of its own; now both lost (1.96% both ways).
 /// On 21 other cut statues (one or both hands, feet, forearms or shins; seeds 101–110,
-/// 120–124) it changed nothing. One work unit per bone, and one per bone examined again.
+/// 120–124) it changed nothing. **Fed and covered** (our choice): a last bone taken lost by
+/// the redundancy test alone (not bare, not laid over its parent, not empty) is kept when it
+/// has what a present end has ([`fed_and_covered`]): its parent present, its mirror present
+/// and covered, at least [`STARVED`] of its mirror's points, coverage at least [`super::support::PARTIAL`]
+/// at its expected size, and a fitted length within [`FED_LENGTH`] of its mirror's. The
+/// bone it joins can explain an end's points nearly as well: seed 316's left foot, cut at
+/// half its length (`synth --seed 316 --rigid --height 1.7 --cut bone:l_foot@0.5`), 266
+/// points against its mirror's 767, coverage 0.82, 1.13 times its mirror's length, removal
+/// excess 0.15 of its radius (the shin's ankle sphere explains the heel); the stylised seed
+/// 208's healthy right hand (`synth --seed 208 --rigid --height 1.7 --symmetric --jitter
+/// 0.5`), 471 against 1,078, coverage 1.0, 1.16 times, 0.18. Both were taken lost; now
+/// neither is (316 0.57% → 0.55% of the height in joint error over the joints the scan has,
+/// 208 4.57% → 4.53%). The true losses it must spare are starved, uncovered or stretched:
+/// on 30 statues (twelve held-out cuts: 300, 304, 305, 307–310, 312, 315–318; ten hands and
+/// feet cut at 0–0.6 of their length or below a forearm or shin cut at 0.9, seeds 320–329;
+/// the stylised 201–208), examined with temporary prints, the lost ends whose parent was
+/// present were starved (nine, coverage 0.00–0.71) or under 0.75 coverage (309's half hand
+/// 0.24, 320's hand cut at the wrist 0.23), and the rule fires on 316 and 208 alone. The
+/// length guards an end stretched over its parent (308's lost hand: 1.88 times its mirror's
+/// length, coverage 1.0, lost with its forearm), and a statue that lost both hands has no
+/// present mirror (seed 122's right hand, coverage 1.0, 539 points against 1,114). The fed-and-covered end is
+/// kept before the both-sides-broken examination below. One work unit per bone, and one per
+/// bone examined again.
 fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result<Vec<bool>> {
     let t = s.world.template.clone();
     let trunk = super::solver::trunk_bones(&t);
     let nb = t.bones.len();
     let mut lost = known.to_vec();
     let mirror = t.mirror_bones();
+    // Bones taken lost by the redundancy test alone (not bare, not laid over their parent,
+    // not empty).
+    let mut only_redundant = vec![false; nb];
     // Parents come before their children in a template's bone order.
     for b in (0..nb).rev() {
         let limb = t.bones[b].kind != BoneKind::Block && !trunk[b];
@@ -1650,12 +1675,13 @@ fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result
         // Empty: starved of every point (its mirror's subtree holds some); its removal costs
         // nothing ([`Solver::removal_excess`] has no point to average over).
         let empty = starved && own == 0;
-        lost[b] = bare
-            || laid_over_parent(s, support, (&mirror, &trunk), &lost, b, limit * radius)
-            || (!hangs_from_trunk
-                && (empty
-                    || s.removal_excess(b, &lost)
-                        .is_some_and(|e| e < limit * radius)));
+        let over_parent = laid_over_parent(s, support, (&mirror, &trunk), &lost, b, limit * radius);
+        let redundant = !hangs_from_trunk
+            && !empty
+            && s.removal_excess(b, &lost)
+                .is_some_and(|e| e < limit * radius);
+        lost[b] = bare || over_parent || (!hangs_from_trunk && empty) || redundant;
+        only_redundant[b] = redundant && !bare && !over_parent;
         // Covered through: a limb bone carrying others, taken lost though it holds points,
         // lies against another part when the scan covers it and every bone below it from end
         // to end and none of their axes is buried in the other bones (a forearm resting on a
@@ -1684,6 +1710,13 @@ fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result
             }
         }
         s.unit().map_err(cancelled)?;
+    }
+    // Fed and covered: a last bone taken lost by the redundancy test alone, at its healthy
+    // size, fed and covered like a present end, beside a present mirror, is kept.
+    for b in 0..nb {
+        if only_redundant[b] && fed_and_covered(s, support, &mirror, &lost, b) {
+            lost[b] = false;
+        }
     }
     // Both sides broken: a last bone examined before its mirror was taken lost is examined
     // again: lost with no point of its own, or by the laid-over-parent rule, which then has
@@ -1747,6 +1780,44 @@ fn laid_over_parent(
     s.removal_excess_with(b, lost, Some((p, reach)))
         .is_some_and(|e| e < bound)
 }
+
+/// The fed-and-covered exception of [`lost_limbs`] for last bone `b` (a hand, a foot, taken
+/// lost by the redundancy test alone): its parent and its mirror are not `lost`, it holds at
+/// least [`STARVED`] of its mirror's points (not starved), the scan covers at least
+/// [`super::support::PARTIAL`] of its surface at its expected size, and its fitted length
+/// lies within [`FED_LENGTH`] of its mirror's (neither shrunk onto a stump nor stretched over
+/// its parent). The mirror must look present too (covered as much, not shrunk): a mirror
+/// not yet taken lost may be the other end of a statue broken on both sides, which the
+/// both-sides-broken examination of [`lost_limbs`] takes later. Such an end has the points, the surface and the size of a present one; the
+/// redundancy test took it because the bone it joins explains its points nearly as well (a
+/// foot cut at half its length, whose heel the shin's ankle sphere explains).
+fn fed_and_covered(
+    s: &Solver,
+    support: &[BoneSupport],
+    mirror: &[Option<usize>],
+    lost: &[bool],
+    b: usize,
+) -> bool {
+    let t = &s.world.template;
+    let (Some(p), Some(m)) = (t.bones[b].parent, mirror[b]) else {
+        return false;
+    };
+    if !t.bones[b].children.is_empty() || lost[p] || lost[m] {
+        return false;
+    }
+    let (own, theirs) = (s.members_of(&[b]), s.members_of(&[m]));
+    let l = &s.world.lengths;
+    let ratio = l[b] / l[m].max(f32::MIN_POSITIVE);
+    own as f64 >= STARVED * theirs as f64
+        && support[b].coverage >= super::support::PARTIAL
+        && (FED_LENGTH.0..=FED_LENGTH.1).contains(&ratio)
+        && support[m].coverage >= super::support::PARTIAL
+        && !support[m].shrunk
+}
+
+/// The range of fitted length, as a share of the mirror's, within which a last bone can be
+/// fed and covered (`fed_and_covered`): [`super::support::SHRUNK`] to its inverse.
+pub const FED_LENGTH: (f32, f32) = (super::support::SHRUNK, 1.0 / super::support::SHRUNK);
 
 /// Whether the scan covers a bone from end to end: coverage at least
 /// [`super::support::PARTIAL`] and reach at least [`THROUGH_REACH`] ([`lost_limbs`]).
