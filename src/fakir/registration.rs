@@ -311,7 +311,9 @@
 //!    other bones; more loosely so when it is starved, with a quarter of the points of its
 //!    mirror's subtree) or when it is bare (no support and no points of its own:
 //!    `lost_limbs`). A hand or foot laid over its parent is lost too, and one whose mirror
-//!    was taken lost is examined again (both hands or both feet broken: `lost_limbs`).
+//!    was taken lost is examined again (both hands or both feet broken: `lost_limbs`); one
+//!    taken lost by the redundancy test alone is kept when it has the points, coverage and
+//!    length of a present end beside a present mirror (fed and covered: `lost_limbs`).
 //!    Lost bones get the expected size and pose of the thesis' ch. 5 (the healthy mirror
 //!    limb's, else the template's), take no points, and the rest of the skeleton is refined
 //!    without them (`final_iterations` whole-skeleton iterations, each limb fitted up to
@@ -1618,8 +1620,9 @@ fn examine_support(
 /// 120–124) it changed nothing. **Fed and covered** (our choice): a last bone taken lost by
 /// the redundancy test alone (not bare, not laid over its parent, not empty) is kept when it
 /// has what a present end has ([`fed_and_covered`]): its parent present, its mirror present
-/// and covered, at least [`STARVED`] of its mirror's points, coverage at least [`super::support::PARTIAL`]
-/// at its expected size, and a fitted length within [`FED_LENGTH`] of its mirror's. The
+/// and covered, at least [`STARVED`] of its mirror's points, coverage at least
+/// [`super::support::PARTIAL`] at its expected size, and a fitted length within
+/// [`FED_LENGTH`] of its mirror's. The
 /// bone it joins can explain an end's points nearly as well: seed 316's left foot, cut at
 /// half its length (`synth --seed 316 --rigid --height 1.7 --cut bone:l_foot@0.5`), 266
 /// points against its mirror's 767, coverage 0.82, 1.13 times its mirror's length, removal
@@ -1635,9 +1638,9 @@ fn examine_support(
 /// 0.24, 320's hand cut at the wrist 0.23), and the rule fires on 316 and 208 alone. The
 /// length guards an end stretched over its parent (308's lost hand: 1.88 times its mirror's
 /// length, coverage 1.0, lost with its forearm), and a statue that lost both hands has no
-/// present mirror (seed 122's right hand, coverage 1.0, 539 points against 1,114). The fed-and-covered end is
-/// kept before the both-sides-broken examination below. One work unit per bone, and one per
-/// bone examined again.
+/// present mirror (seed 122's right hand, coverage 1.0, 539 points against 1,114). The
+/// fed-and-covered end is kept before the both-sides-broken examination below. One work unit
+/// per bone, and one per bone examined again.
 fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result<Vec<bool>> {
     let t = s.world.template.clone();
     let trunk = super::solver::trunk_bones(&t);
@@ -1788,9 +1791,10 @@ fn laid_over_parent(
 /// lies within [`FED_LENGTH`] of its mirror's (neither shrunk onto a stump nor stretched over
 /// its parent). The mirror must look present too (covered as much, not shrunk): a mirror
 /// not yet taken lost may be the other end of a statue broken on both sides, which the
-/// both-sides-broken examination of [`lost_limbs`] takes later. Such an end has the points, the surface and the size of a present one; the
-/// redundancy test took it because the bone it joins explains its points nearly as well (a
-/// foot cut at half its length, whose heel the shin's ankle sphere explains).
+/// both-sides-broken examination of [`lost_limbs`] takes later. Such an end has the points,
+/// the surface and the size of a present one; the redundancy test took it because the bone
+/// it joins explains its points nearly as well (a foot cut at half its length, whose heel
+/// the shin's ankle sphere explains).
 fn fed_and_covered(
     s: &Solver,
     support: &[BoneSupport],
