@@ -1678,13 +1678,18 @@ fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result
         // Empty: starved of every point (its mirror's subtree holds some); its removal costs
         // nothing ([`Solver::removal_excess`] has no point to average over).
         let empty = starved && own == 0;
-        let over_parent = laid_over_parent(s, support, (&mirror, &trunk), &lost, b, limit * radius);
-        let redundant = !hangs_from_trunk
+        // Each test runs only when the ones before it did not take the bone (as the
+        // short-circuiting `||` did before `only_redundant` needed the redundancy verdict).
+        let over_parent =
+            !bare && laid_over_parent(s, support, (&mirror, &trunk), &lost, b, limit * radius);
+        let redundant = !bare
+            && !over_parent
+            && !hangs_from_trunk
             && !empty
             && s.removal_excess(b, &lost)
                 .is_some_and(|e| e < limit * radius);
         lost[b] = bare || over_parent || (!hangs_from_trunk && empty) || redundant;
-        only_redundant[b] = redundant && !bare && !over_parent;
+        only_redundant[b] = redundant;
         // Covered through: a limb bone carrying others, taken lost though it holds points,
         // lies against another part when the scan covers it and every bone below it from end
         // to end and none of their axes is buried in the other bones (a forearm resting on a
