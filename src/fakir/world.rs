@@ -536,6 +536,13 @@ impl WorldSkeleton {
         Some(share(&|b| self.lengths[b])? / share(&|b| self.rest_lengths[b])?)
     }
 
+    /// The template's trunk chain carried by the root block (the human's spine: the chain of
+    /// the slid-block check and of [`WorldSkeleton::trunk_end_share`]), or `None`.
+    pub fn trunk_chain(&self) -> Option<usize> {
+        let (_, first) = trunk_on_block(&self.template)?;
+        self.template.bones[first].chain.map(|(c, _)| c)
+    }
+
     /// The chain from free bone `a` to its end **slid one bone down** (the start of the
     /// slid-limb check): `a` reaches from its first joint to the end of the next bone of its
     /// chain, each later bone takes the direction and length of the one after it, and the
