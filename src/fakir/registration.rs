@@ -1122,6 +1122,9 @@ fn register_here(
             .is_some_and(|share| share < SQUEEZED_END)
             && let Some(chain) = s.world.trunk_chain()
         {
+            // Through the world view again, as measured (the start collapsed on the lost
+            // bones by `start_at`); collapsing `limb_reset`'s skeleton directly starts from
+            // other roundings, and seed 6 without normals then ends at 1.26%, not 1.22%.
             let reset = limb_reset(&s.world, chain).skeleton;
             let c = full.start_at(&WorldSkeleton::from_skeleton(&reset), s.world.block_scale);
             s = full.challenge(s, &ch, (&c, check_span(7)), &mut iterations, lower)?;
