@@ -153,9 +153,13 @@ fn fit_json_support_flags_agree_with_its_lists() {
     support[bone("r_shin")].partial = true;
     support[bone("l_forearm")].coverage = 0.6;
     support[bone("l_forearm")].partial = true;
+    // The left arm broke part-way along the upper arm (its support reaches 0.4 of it); the
+    // right hand was cut at the wrist (the forearm's support reaches through it).
+    support[bone("l_upper_arm")].reach = 0.4;
     let mut missing = vec![false; nb];
     missing[bone("l_forearm")] = true;
     missing[bone("l_hand")] = true;
+    missing[bone("r_hand")] = true;
     let fit = Fit {
         skeleton: Skeleton::rest(t.clone()),
         labels: Vec::new(),
@@ -178,9 +182,12 @@ fn fit_json_support_flags_agree_with_its_lists() {
             .map(|x| x.as_str().unwrap().to_string())
             .collect()
     };
-    assert_eq!(names("missing"), ["l_forearm", "l_hand"]);
-    // The uncovered head is not lost (a trunk bone): listed partial.
-    assert_eq!(names("partial"), ["r_shin", "head"]);
+    assert_eq!(names("missing"), ["l_forearm", "l_hand", "r_hand"]);
+    // The uncovered head is not lost (a trunk bone): listed partial. So is the bone the left
+    // arm broke on, covered but not through; not the right forearm.
+    let mut partial = names("partial");
+    partial.sort();
+    assert_eq!(partial, ["head", "l_upper_arm", "r_shin"]);
     for s in v["support"].as_array().unwrap() {
         let b = s["bone"].as_str().unwrap().to_string();
         assert_eq!(

@@ -66,7 +66,8 @@ pub struct FitReport {
     /// Bones of lost limbs: completed to their expected size and pose (the healthy mirror
     /// limb's, or the template's), no point assigned.
     pub missing: Vec<String>,
-    /// Bones only partly covered by the scan (a limb broken part-way along them).
+    /// Bones only partly there ([`crate::fakir::Fit::partial`]): partly covered by the scan,
+    /// or the bone a lost limb broke on, its support not reaching through it.
     pub partial: Vec<String>,
     /// The support of every bone: covered share of its surface, axial reach. Its `missing`
     /// and `partial` flags are the verdicts of the two lists above, so the report never
@@ -96,18 +97,15 @@ impl FitReport {
         let j = fit.skeleton.to_json();
         let t = &fit.skeleton.template;
         // The support's flags as the registration decided (see `FitReport::support`).
+        let partial = fit.partial();
         let support: Vec<crate::fakir::support::BoneSupport> = fit
             .support
             .iter()
             .enumerate()
-            .map(|(k, s)| {
-                let lost = fit.missing.get(k).copied().unwrap_or(false);
-                crate::fakir::support::BoneSupport {
-                    missing: lost,
-                    // Under 0.4 coverage but not lost (a trunk bone): partly covered.
-                    partial: (s.partial || s.missing) && !lost,
-                    ..s.clone()
-                }
+            .map(|(k, s)| crate::fakir::support::BoneSupport {
+                missing: fit.missing.get(k).copied().unwrap_or(false),
+                partial: partial[k],
+                ..s.clone()
             })
             .collect();
         FitReport {
