@@ -2153,44 +2153,6 @@ fn a_foot_cut_at_half_its_length_is_not_taken_lost() {
 }
 
 #[test]
-fn a_limb_cut_part_way_along_a_bone_keeps_that_bone() {
-    // `synth --seed 308 --rigid --height 1.7 --cut bone:l_forearm@0.6` and seed 304 with
-    // `--cut bone:l_shin@0.2` (30k points, held out while the lost-limb rules were built).
-    // The forearm's and the shin's stumps were taken lost with what they carry: the upper
-    // arm and the thigh, lengthened or thickened, explain the stump's points nearly as well.
-    // Their support on the fit as judged reaches 0.3 and 0.4 of them from their first joint:
-    // stumps (`lost_limbs`), kept, the hand and the foot lost below them (0.60% and 0.60% of
-    // the height in joint error over the joints the scan has). The guard at 2%.
-    on_one_thread(|| {
-        held_out_cut(
-            308,
-            ("l_forearm", 0.6),
-            &["l_hand"],
-            &["l_wrist", "l_hand_tip"],
-        );
-        held_out_cut(304, ("l_shin", 0.2), &["l_foot"], &["l_ankle", "l_toe"]);
-    })
-}
-
-#[test]
-fn a_lost_bone_barely_covered_at_its_root_is_no_stump() {
-    // `synth --seed 313 --rigid --height 1.7 --cut bone:r_thigh@0.5` (30k points, held out
-    // while the lost-limb rules were built). The shin below the cut thigh is truly lost, and
-    // its support on the fit as judged reaches 0.2 of it (one of ten bins past the first):
-    // under `STUMP_REACH` (0.3) it stays lost with the foot (a threshold of 0.2 kept it as a
-    // stump, 0.87%). 0.70% of the height in joint error over the joints the scan has; the
-    // guard at 2%.
-    on_one_thread(|| {
-        held_out_cut(
-            313,
-            ("r_thigh", 0.5),
-            &["r_shin", "r_foot"],
-            &["r_knee", "r_ankle", "r_toe"],
-        )
-    })
-}
-
-#[test]
 fn a_fit_far_from_its_points_is_searched_again_about_tilted_ups() {
     // `synth --seed 303 --rigid --height 1.7 --cut bone:r_thigh@0.7` (30k points, held out
     // while the lost-limb rules were built). The placements align the template's long axis

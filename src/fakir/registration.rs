@@ -574,10 +574,9 @@ impl Fit {
     /// [`Fit::missing`], and either under [`super::support::PARTIAL`] coverage (a trunk bone
     /// under [`super::support::MISSING`] included: the trunk is never lost), or the bone a
     /// lost limb broke on — it carries a missing bone and its support does not reach through
-    /// it ([`THROUGH_REACH`]; a bone whose child was cut at their joint is whole). A forearm
-    /// cut at 0.6 of its length and refitted on its stump can be covered well enough
-    /// (coverage 0.78 on `synth --seed 308 --rigid --height 1.7 --cut bone:l_forearm@0.6`)
-    /// while its support reaches 0.3 of it.
+    /// it ([`THROUGH_REACH`]; a bone whose child was cut at their joint is whole): a bone
+    /// refitted on its stump can be covered well enough while its support reaches only part
+    /// of it.
     pub fn partial(&self) -> Vec<bool> {
         let t = &self.skeleton.template;
         let missing = |b: usize| self.missing.get(b).copied().unwrap_or(false);
@@ -1688,19 +1687,8 @@ fn examine_support(
 /// length guards an end stretched over its parent (308's lost hand: 1.88 times its mirror's
 /// length, coverage 1.0, lost with its forearm), and a statue that lost both hands has no
 /// present mirror (seed 122's right hand, coverage 1.0, 539 points against 1,114). The
-/// fed-and-covered end is kept before the both-sides-broken examination below. **A stump**
-/// (our choice, last): the first lost bone of a limb (its parent present, itself not known
-/// lost) whose support, on the fit as judged, reaches from its first joint at least
-/// [`STUMP_REACH`] of its length but not through it ([`THROUGH_REACH`]) is the bone the limb
-/// broke on: it is kept, and the bones below it stay lost ([`is_stump`]). The redundancy
-/// test takes such a bone because its parent, lengthened or thickened, explains the stump's
-/// points nearly as well (the trials "a stump kept alone" in the README); where the points
-/// lie along the bone tells it. On the 20 held-out cut statues of `bench --only
-/// fakir/accuracy_cuts` the cut bones taken lost reached 0.3–0.5 (seeds 304, 308, 309:
-/// shin at 0.2, forearm at 0.6, hand at 0.5), the first truly lost bones 0.0–0.2 (seed 313's
-/// shin below a thigh cut at 0.5: 0.2) or 1.0 (a hand laid over another part); a threshold
-/// of 0.2 took 313's shin for a stump. One work unit per bone, and one per bone examined
-/// again.
+/// fed-and-covered end is kept before the both-sides-broken examination below. One work unit
+/// per bone, and one per bone examined again.
 fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result<Vec<bool>> {
     let t = s.world.template.clone();
     let trunk = super::solver::trunk_bones(&t);
@@ -1800,42 +1788,8 @@ fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result
             s.unit().map_err(cancelled)?;
         }
     }
-    // A stump: the first lost bone of a limb whose support reaches part-way along it is cut
-    // there, not lost; the bones below it stay lost (judged on the lost set as it was, so a
-    // bone below a stump is never one).
-    let judged = lost.clone();
-    for (b, l) in lost.iter_mut().enumerate() {
-        if is_stump(&t, support, (known, &judged), b) {
-            *l = false;
-        }
-    }
     Ok(lost)
 }
-
-/// The stump rule of [`lost_limbs`]: limb bone `b`, taken lost though not known lost, whose
-/// parent is present, and whose support ([`super::support`], on the fit as judged) reaches
-/// from its first joint at least [`STUMP_REACH`] of its length without covering it
-/// through ([`THROUGH_REACH`]). `known` and `lost`: the bones known lost and those taken
-/// lost so far.
-fn is_stump(
-    t: &Template,
-    support: &[BoneSupport],
-    (known, lost): (&[bool], &[bool]),
-    b: usize,
-) -> bool {
-    let Some(p) = t.bones[b].parent else {
-        return false;
-    };
-    lost[b]
-        && !known[b]
-        && !lost[p]
-        && t.bones[b].kind != BoneKind::Block
-        && (STUMP_REACH..THROUGH_REACH).contains(&support[b].reach)
-}
-
-/// The reach (an axial fraction, [`super::support`]) from which a lost limb bone's support
-/// says it is a stump ([`is_stump`]).
-pub const STUMP_REACH: f32 = 0.3;
 
 /// The laid-over-parent rule of [`lost_limbs`]: last bone `b` without support (at its
 /// expected size) whose mirror has support, shorter with its parent than their mirrors (a cut
