@@ -2437,8 +2437,8 @@ fn trunk_reset_registration() {
     use pygmalion::fakir::registration::SQUEEZED_END;
     // `synth --seed 6 --rigid --height 1.7` (30k points) without its normals: the
     // registration estimates them from the positions, as for any such file (100% agree in
-    // sign with the true ones, median angle 0.97 degrees). Without the trunk-reset check its spine
-    // slid up into the head, the neck and head squeezed above it (0.25 of their share of
+    // sign with the true ones, median angle 0.97 degrees). Without the trunk-reset check its
+    // spine slid up into the head, the neck and head squeezed above it (0.25 of their share of
     // the trunk chain), and the slid block did not mend it (the pelvis was in place): joint
     // error 4.43% of the height. With it, 1.22%.
     let mut s = posed_human(6, 30_000);
