@@ -338,6 +338,56 @@ fn the_mean_spacing_summed_in_slices_is_the_mean_spacing_bit_for_bit() {
     }
 }
 
+/// A Jacobian row whose entries outside its bone's active parameters are zeros adds the same
+/// `JᵀJ`, `Jᵀr` and energy, bit for bit, through `NormalEquations::add_sparse_row` (the active
+/// entries only) as through `add_row` (every entry): the normal equations skip the zeros of
+/// the whole-chain fit's rows without changing a registration. Zeros of both signs, rows of
+/// several active sets mixed in one sum, partial sums added together as the chunks are.
+#[test]
+fn a_sparse_normal_row_adds_what_the_dense_row_adds_bit_for_bit() {
+    use pygmalion::fakir::lm::NormalEquations;
+    use pygmalion::rng::Rng;
+    let k = 17;
+    let mut rng = Rng::new(7);
+    // Active sets of a chain's bones: the first bones' rows are mostly zeros.
+    let sets: Vec<Vec<usize>> = vec![
+        vec![0, 1, 8, 12, 13],
+        vec![0, 1, 2, 3, 8, 9, 12, 13, 14],
+        (0..k).filter(|j| j % 3 != 1).collect(),
+        vec![16],
+        vec![],
+    ];
+    let (mut dense, mut sparse) = (NormalEquations::zeros(k), NormalEquations::zeros(k));
+    for chunk in 0..6 {
+        let (mut d, mut s) = (NormalEquations::zeros(k), NormalEquations::zeros(k));
+        for i in 0..500 {
+            let act = &sets[(chunk + i) % sets.len()];
+            let mut row = vec![0.0f64; k];
+            for (j, x) in row.iter_mut().enumerate() {
+                *x = if act.contains(&j) {
+                    (rng.range(-3.0, 3.0) as f64) * 1e-3
+                } else if rng.f32() < 0.5 {
+                    -0.0
+                } else {
+                    0.0
+                };
+            }
+            let r = rng.range(-1.0, 1.0) as f64;
+            d.add_row(&row, r);
+            let packed: Vec<f64> = act.iter().map(|&j| row[j]).collect();
+            s.add_sparse_row(act, &packed, r);
+        }
+        assert_eq!(bits(&d.jtj), bits(&s.jtj), "chunk {chunk}: JᵀJ");
+        dense.add(&d);
+        sparse.add(&s);
+    }
+    assert_eq!(bits(&dense.jtj), bits(&sparse.jtj), "JᵀJ");
+    assert_eq!(bits(&dense.jtr), bits(&sparse.jtr), "Jᵀr");
+    assert_eq!(dense.energy.to_bits(), sparse.energy.to_bits(), "energy");
+    // The sums are not trivially zero.
+    assert!(dense.jtj.iter().filter(|x| **x != 0.0).count() > 50);
+}
+
 /// The LM sums cut into work-unit slices (`NormalAccumulator`, `EnergyAccumulator`) are the
 /// unsliced sums bit for bit, whatever the slice size, so pausing between slices cannot
 /// change a registration.

@@ -747,7 +747,7 @@ impl NormalEquations {
     /// Adds one residual `r` with its Jacobian row (`k` entries): `r²` to the energy, the
     /// row to `JᵀJ` (upper triangle) and `Jᵀr`.
     #[inline]
-    fn add_row(&mut self, row: &[f64], r: f64) {
+    pub fn add_row(&mut self, row: &[f64], r: f64) {
         self.energy += r * r;
         let k = self.k();
         let row = &row[..k];
@@ -760,8 +760,27 @@ impl NormalEquations {
         }
     }
 
+    /// [`NormalEquations::add_row`] for a row whose only entries that may be nonzero are those
+    /// of the parameters `active` (increasing), `row[a]` being parameter `active[a]`'s. The
+    /// other entries are zeros (of either sign), whose products the dense row would add:
+    /// adding `±0` to a sum that started at `+0` changes no bit of it (a sum of such terms
+    /// cannot become `−0`), so the sums are the dense row's, bit for bit, as long as the row
+    /// holds no infinity or NaN (an infinite entry times a zero would have made a NaN).
+    #[inline]
+    pub fn add_sparse_row(&mut self, active: &[usize], row: &[f64], r: f64) {
+        self.energy += r * r;
+        let k = self.k();
+        for (a, (&j, &rj)) in active.iter().zip(row).enumerate() {
+            self.jtr[j] += rj * r;
+            let upper = &mut self.jtj[j * k..(j + 1) * k];
+            for (&m, &rm) in active[a..].iter().zip(&row[a..]) {
+                upper[m] += rj * rm;
+            }
+        }
+    }
+
     /// Adds the sums of `other` (same `k`) entry by entry.
-    fn add(&mut self, other: &NormalEquations) {
+    pub fn add(&mut self, other: &NormalEquations) {
         let k = self.k();
         for j in 0..k {
             let upper = j * k + j..(j + 1) * k;
@@ -796,6 +815,10 @@ pub struct NormalAccumulator {
     bones: Vec<Bone>,
     /// `geo[b * k + j]`: the derivatives of bone `b` with respect to parameter `j`.
     geo: Vec<GeoDeriv>,
+    /// `active[b]`: the parameters (increasing) whose derivatives of bone `b` are not all
+    /// zero. The whole-chain fit's parameters move only the bones from theirs on, so the
+    /// rows of a chain's first bones are mostly zeros ([`NormalEquations::add_sparse_row`]).
+    active: Vec<Vec<usize>>,
     occ_deriv: Vec<Vec<Vec3>>,
     prior_deriv: Vec<Vec<f64>>,
     cursor: Cursor,
@@ -852,10 +875,20 @@ impl NormalAccumulator {
                 };
             }
         }
+        let mut active = vec![Vec::new(); bones.len()];
+        for &b in terms.bones {
+            active[b] = (0..k)
+                .filter(|&j| {
+                    let d = &geo[b * k + j];
+                    d.dc1 != Vec3::ZERO || d.dc2 != Vec3::ZERO || d.dr1 != 0.0 || d.dr2 != 0.0
+                })
+                .collect();
+        }
         NormalAccumulator {
             k,
             bones,
             geo,
+            active,
             occ_deriv,
             prior_deriv,
             cursor: Cursor::default(),
@@ -873,22 +906,34 @@ impl NormalAccumulator {
     pub fn feed_rows(&mut self, terms: &EnergyTerms, budget: usize, rows: &mut Rows) -> bool {
         let a = terms.assignment;
         let k = self.k;
-        let (geo, sums) = (&self.geo, &mut self.sums);
+        let (geo, active, sums) = (&self.geo, &self.active, &mut self.sums);
         self.cursor
             .advance(terms, &self.bones, budget, |b, pb, run, at, _| {
                 let g = &geo[b * k..(b + 1) * k];
+                let act = &active[b];
+                let entry = |grad: &BoneGradient, d: &GeoDeriv| {
+                    (grad.dc1.dot(d.dc1)
+                        + grad.dc2.dot(d.dc2)
+                        + grad.dr1 * d.dr1
+                        + grad.dr2 * d.dr2) as f64
+                };
                 let parts = chunk_rows(a, pb, run, at, rows, |c| {
                     let mut part = NormalEquations::zeros(k);
                     let mut row = [0.0f64; MAX_PARAMS];
-                    for (r, grad) in c {
-                        let r = *r as f64;
-                        for (x, d) in row.iter_mut().zip(g) {
-                            *x = (grad.dc1.dot(d.dc1)
-                                + grad.dc2.dot(d.dc2)
-                                + grad.dr1 * d.dr1
-                                + grad.dr2 * d.dr2) as f64;
+                    if act.len() == k {
+                        for (r, grad) in c {
+                            for (x, d) in row.iter_mut().zip(g) {
+                                *x = entry(grad, d);
+                            }
+                            part.add_row(&row[..k], *r as f64);
                         }
-                        part.add_row(&row[..k], r);
+                    } else {
+                        for (r, grad) in c {
+                            for (x, &j) in row.iter_mut().zip(act) {
+                                *x = entry(grad, &g[j]);
+                            }
+                            part.add_sparse_row(act, &row[..act.len()], *r as f64);
+                        }
                     }
                     part
                 });
