@@ -920,6 +920,8 @@ impl NormalAccumulator {
                 let parts = chunk_rows(a, pb, run, at, rows, |c| {
                     let mut part = NormalEquations::zeros(k);
                     let mut row = [0.0f64; MAX_PARAMS];
+                    // Every parameter active (the papers' one- and two-bone groups): the
+                    // plain row, without the indirection through `act`.
                     if act.len() == k {
                         for (r, grad) in c {
                             for (x, d) in row.iter_mut().zip(g) {
