@@ -580,6 +580,44 @@ fn an_assignment_built_in_slices_equals_one_built_at_once() {
     }
 }
 
+/// The mean distance (eq. 2.16) is the sum, in order, of the sums of runs of `CHUNK` points
+/// (each run summed in order), over the point count: bit for bit, whatever the threads, for
+/// a count that is not a multiple of `CHUNK` (5,000 = 2 × 2,048 + 904) and for one run.
+#[test]
+fn the_mean_distance_sums_runs_of_chunk_points_in_order() {
+    use pygmalion::fakir::assign::CHUNK;
+    for points in [5_000usize, 700] {
+        let s = chain4(points, 4, 0.5, 0.0, vec![]).unwrap();
+        let mut a = assignment_of(&s, 0.28);
+        let prepared: Vec<_> = s.truth.pose().bones.iter().map(|b| b.prepare()).collect();
+        a.refresh(&prepared, &[0, 1, 2, 3]);
+        let n = a.len();
+        assert_eq!(n, points);
+        let runs: Vec<f64> = (0..n)
+            .step_by(CHUNK)
+            .map(|start| {
+                (start..(start + CHUNK).min(n))
+                    .map(|i| a.own_distance(i) as f64)
+                    .sum::<f64>()
+            })
+            .collect();
+        let expected = runs.iter().sum::<f64>() / n as f64;
+        assert!(expected > 0.0);
+        for threads in [1, 2, 3] {
+            let got = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| a.mean_distance());
+            assert_eq!(
+                got.to_bits(),
+                expected.to_bits(),
+                "{points} points, {threads} threads"
+            );
+        }
+    }
+}
+
 /// Mean joint error of a fitted skeleton against the truth, as a fraction of `height`.
 pub fn joint_error(fit: &Skeleton, truth: &Skeleton, height: f32) -> f32 {
     fit.mean_joint_distance(truth) / height
@@ -604,33 +642,56 @@ fn small_human(seed: u64, points: usize, random_pose: bool) -> SynthStatue {
     .unwrap()
 }
 
-#[test]
-fn registration_steps_of_any_budget_give_the_same_bytes() {
-    // A complete statue, and a broken one (its lost forearm and hand settled by level 6).
-    for s in [
-        small_human(11, 3_000, true),
-        cut_human(12, 3_000, &[("l_forearm", 0.0)]),
-    ] {
-        budgets_give_the_same_bytes(&s);
-    }
-}
-
-fn budgets_give_the_same_bytes(s: &SynthStatue) {
-    use pygmalion::fakir::{Registration, RegistrationOptions};
-    use std::sync::Arc;
-    use std::time::Duration;
-    let t = s.truth.template.clone();
-    let opts = RegistrationOptions {
+/// Options of the small registrations whose bytes the stepping and row-reuse tests compare.
+fn small_options() -> pygmalion::fakir::RegistrationOptions {
+    pygmalion::fakir::RegistrationOptions {
         subsample: 1_500,
         init_subsample: 600,
         ..Default::default()
-    };
+    }
+}
+
+/// A complete statue and a broken one (its lost forearm and hand settled by level 6), each
+/// with its registration under [`small_options`] run to convergence. Computed once for the
+/// tests that compare other ways of running the same registration against it (a second
+/// caller waits for the first; the two registrations run in parallel).
+fn small_references() -> &'static [(SynthStatue, pygmalion::fakir::Fit)] {
+    static REFERENCES: std::sync::OnceLock<Vec<(SynthStatue, pygmalion::fakir::Fit)>> =
+        std::sync::OnceLock::new();
+    REFERENCES.get_or_init(|| {
+        use rayon::prelude::*;
+        // Both at once: the test waiting for them lends its core.
+        vec![
+            small_human(11, 3_000, true),
+            cut_human(12, 3_000, &[("l_forearm", 0.0)]),
+        ]
+        .into_par_iter()
+        .map(|s| {
+            let fit = register_with(&s, small_options());
+            (s, fit)
+        })
+        .collect()
+    })
+}
+
+#[test]
+fn registration_steps_of_any_budget_give_the_same_bytes() {
+    for (s, reference) in small_references() {
+        budgets_give_the_same_bytes(s, reference);
+    }
+}
+
+/// Runs `s`'s registration under [`small_options`] in steps of a zero budget (one work unit a
+/// step: every unit boundary is a pause) and of 5 ms (several units a step) and compares each
+/// result with `reference`, the same registration run to convergence.
+fn budgets_give_the_same_bytes(s: &SynthStatue, reference: &pygmalion::fakir::Fit) {
+    use pygmalion::fakir::Registration;
+    use std::sync::Arc;
+    use std::time::Duration;
+    let t = s.truth.template.clone();
+    let opts = small_options();
     let cloud = Arc::new(s.cloud.clone());
-    let reference = Registration::new(cloud.clone(), t.clone(), opts.clone())
-        .unwrap()
-        .run_to_convergence()
-        .unwrap();
-    for budget_us in [0u64, 300, 5_000] {
+    for budget_us in [0u64, 5_000] {
         let mut reg = Registration::new(cloud.clone(), t.clone(), opts.clone()).unwrap();
         let mut steps = 0;
         let mut last_units = 0;
@@ -696,25 +757,12 @@ fn budgets_give_the_same_bytes(s: &SynthStatue) {
 /// reading rows is sliced like one projecting).
 #[test]
 fn reusing_the_last_pass_rows_gives_the_same_bytes() {
-    use pygmalion::fakir::{Registration, RegistrationOptions};
-    use std::sync::Arc;
-    for s in [
-        small_human(11, 3_000, true),
-        cut_human(12, 3_000, &[("l_forearm", 0.0)]),
-    ] {
-        let fit = |reuse_rows: bool| {
-            let mut opts = RegistrationOptions {
-                subsample: 1_500,
-                init_subsample: 600,
-                ..Default::default()
-            };
-            opts.solver.reuse_rows = reuse_rows;
-            Registration::new(Arc::new(s.cloud.clone()), s.truth.template.clone(), opts)
-                .unwrap()
-                .run_to_convergence()
-                .unwrap()
-        };
-        let (with, without) = (fit(true), fit(false));
+    // The references read the rows (`reuse_rows` is on by default).
+    for (s, with) in small_references() {
+        assert!(small_options().solver.reuse_rows);
+        let mut opts = small_options();
+        opts.solver.reuse_rows = false;
+        let without = register_with(s, opts);
         assert_eq!(with.labels, without.labels);
         assert_eq!(
             with.mean_distance.to_bits(),
