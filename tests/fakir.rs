@@ -758,8 +758,8 @@ fn budgets_give_the_same_bytes(s: &SynthStatue, reference: &pygmalion::fakir::Fi
 #[test]
 fn reusing_the_last_pass_rows_gives_the_same_bytes() {
     // The references read the rows (`reuse_rows` is on by default).
+    assert!(small_options().solver.reuse_rows);
     for (s, with) in small_references() {
-        assert!(small_options().solver.reuse_rows);
         let mut opts = small_options();
         opts.solver.reuse_rows = false;
         let without = register_with(s, opts);
