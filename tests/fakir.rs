@@ -1,4 +1,13 @@
 //! Tests of `fakir`: the papers' chain experiment, LM derivatives, whole-skeleton registration.
+//!
+//! **Long tier.** The regression statues of the level-5 checks and the level-6 lost-limb rules
+//! (one whole registration of one generator statue each, most at 30k points with the CLI's
+//! defaults, 50–255 s each on our 2-core machine) are `#[ignore]`d with the reason "long
+//! tier": `bash tests/run.sh` (and CI) leaves them out, `bash tests/run.sh --include-ignored`
+//! runs them with the rest, `bash tests/run.sh --ignored` runs them alone. Any change to what
+//! a registration computes runs them before it is committed. One case per family of checks
+//! stays in the default run (the crossed legs, the arm slid one joint in, both hands cut at
+//! the wrists) beside the accuracy, template, stepping and lost-limb tests.
 
 use crate::common::on_one_thread;
 use pygmalion::anatomy::Skeleton;
@@ -1537,6 +1546,7 @@ fn lost_limbs_registration() {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn limb_bones_folded_onto_a_stump_or_into_the_trunk_are_found_lost() {
     on_one_thread(starved_limbs_registration);
 }
@@ -1566,6 +1576,7 @@ fn starved_limbs_registration() {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_leg_cut_through_the_thigh_does_not_take_the_other_leg() {
     on_one_thread(|| {
         // The crossed-over-limb check: seed 62 cut through the left thigh at 0.3 (30k points,
@@ -1586,6 +1597,7 @@ fn a_leg_cut_through_the_thigh_does_not_take_the_other_leg() {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_hand_cut_at_the_wrist_is_found_lost_though_the_forearm_made_room_for_it() {
     on_one_thread(|| {
         // Seed 98 without its right hand (cut at the wrist; 30k points, as the CLI runs it).
@@ -1974,6 +1986,7 @@ fn facing_registration() {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_fit_still_facing_backwards_after_the_refits_is_turned_around() {
     on_one_thread(second_facing_registration);
 }
@@ -2185,6 +2198,7 @@ fn a_starved_limb_whose_mirror_reached_over_to_its_place_is_found() {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_statue_fitted_upside_down_is_turned_upright() {
     // `synth --seed 81 --rigid --height 1.7 --cut bone:l_thigh@0.6` (30k points), registered
     // as `register` does. With its left leg lost through the thigh, the finalists' rule kept
@@ -2197,6 +2211,7 @@ fn a_statue_fitted_upside_down_is_turned_upright() {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_statue_whose_flipped_finalist_fits_badly_is_searched_upright() {
     // `synth --seed 47 --rigid --height 1.7 --cut bone:r_thigh@0.5` (30k points), registered
     // as `register` does. It was fitted upside down (46.7% over the joints the scan has, a
@@ -2207,6 +2222,7 @@ fn a_statue_whose_flipped_finalist_fits_badly_is_searched_upright() {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_cut_limb_whose_hand_holds_no_point_is_found_lost() {
     // `synth --seed 300 --rigid --height 1.7 --cut bone:l_upper_arm@0.5` (30k points, held
     // out while the lost-limb rules were built), registered as `register` does. FAKIR folds
@@ -2225,6 +2241,7 @@ fn a_cut_limb_whose_hand_holds_no_point_is_found_lost() {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_forearm_resting_on_the_thigh_is_not_taken_lost() {
     // `synth --seed 306 --rigid --height 1.7 --cut bone:l_shin@0.6` (30k points, held out
     // while the lost-limb rules were built). The left hand rests on the knee and the forearm
@@ -2239,6 +2256,7 @@ fn a_forearm_resting_on_the_thigh_is_not_taken_lost() {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_foot_cut_at_half_its_length_is_not_taken_lost() {
     // `synth --seed 316 --rigid --height 1.7 --cut bone:l_foot@0.5` (30k points, held out
     // while the lost-limb rules were built). The shin's ankle sphere explains the heel left
@@ -2251,6 +2269,7 @@ fn a_foot_cut_at_half_its_length_is_not_taken_lost() {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_fit_far_from_its_points_is_searched_again_about_tilted_ups() {
     // `synth --seed 303 --rigid --height 1.7 --cut bone:r_thigh@0.7` (30k points, held out
     // while the lost-limb rules were built). The placements align the template's long axis
@@ -2406,6 +2425,7 @@ fn a_folded_joint_is_found_and_unfolding_lays_the_chain_straight() {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_fit_with_a_folded_arm_is_registered_again_unfolded() {
     on_one_thread(folded_registration);
 }
@@ -2483,6 +2503,7 @@ fn the_trunk_end_share_is_one_at_rest_and_halves_with_the_neck_and_head() {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_fit_squeezed_at_the_head_has_its_block_slid_down() {
     on_one_thread(squeezed_registration);
 }
@@ -2527,6 +2548,7 @@ fn the_trunk_chain_is_the_spine_on_the_block() {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_trunk_still_squeezed_after_the_slid_block_is_reset() {
     on_one_thread(trunk_reset_registration);
 }
@@ -2591,6 +2613,7 @@ fn sliding_a_limb_down_moves_each_joint_to_the_next() {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_fit_with_its_pelvis_and_a_leg_a_bone_too_high_is_registered_again_slid_down() {
     on_one_thread(slid_registration);
 }
@@ -3084,6 +3107,7 @@ fn a_fit_with_an_arm_slid_one_joint_in_is_registered_again_slid_out() {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_fit_with_an_arm_run_backwards_is_registered_again_turned_around() {
     on_one_thread(|| {
         use pygmalion::fakir::support::MISSING;
@@ -3117,6 +3141,7 @@ fn register_complete_seed(seed: u64) -> (SynthStatue, pygmalion::fakir::Fit) {
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_fit_with_a_forearm_stretched_over_the_hand_is_registered_again_with_the_hand() {
     on_one_thread(|| {
         // `synth --seed 10 --rigid --height 1.7` (30k points). Without the dangling-end check
@@ -3132,6 +3157,7 @@ fn a_fit_with_a_forearm_stretched_over_the_hand_is_registered_again_with_the_han
 }
 
 #[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_fit_with_an_arm_folded_up_on_itself_is_registered_again_with_the_arm() {
     on_one_thread(|| {
         // `synth --seed 15 --rigid --height 1.7` (30k points). Its fit had the right arm

@@ -4,6 +4,9 @@
 //! Checks over the whole real data set (`../shared/data`) run only when the environment
 //! variable `PYGMALION_DATA` names that folder (`.ci/run` sets it when the folder exists);
 //! everything else runs on bundled assets and synthetic statues.
+//!
+//! The long tier (registrations of single regression statues, `#[ignore = "long tier …"]`,
+//! see `fakir`) runs only when asked: `bash tests/run.sh --include-ignored`.
 
 mod common;
 

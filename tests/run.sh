@@ -6,6 +6,8 @@
 #   PYGMALION_DATA=../shared/data bash tests/run.sh   # plus the checks over every real scan
 #   PYGMALION_RENDER_TESTS=0 bash tests/run.sh        # without the GPU rendering test
 #   bash tests/run.sh kiosk_render                    # only the tests whose name has this
+#   bash tests/run.sh --include-ignored               # plus the long tier (regression statues)
+#   bash tests/run.sh --ignored                       # the long tier alone
 #
 # The kiosk's rendering test draws the bundled statue with the real renderer. Without a GPU it
 # runs on Mesa's software Vulkan (lavapipe) in a virtual X server (Xvfb), which this script
