@@ -15,6 +15,7 @@ mod anatomy_compare;
 mod anatomy_pose;
 mod cli;
 mod cloud_base;
+mod cloud_grid;
 mod cloud_normals;
 mod cloud_ply;
 mod fakir;

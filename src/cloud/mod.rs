@@ -1,7 +1,9 @@
 //! Point clouds: the [`PointCloud`] container (structure of arrays), PLY input/output
-//! ([`ply`]), normal estimation ([`normals`]) and the statue's base ([`base`]).
+//! ([`ply`]), normal estimation ([`normals`]), the statue's base ([`base`]) and a grid for
+//! near-point tests ([`grid`]).
 
 pub mod base;
+pub mod grid;
 pub mod normals;
 pub mod ply;
 

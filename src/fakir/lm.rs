@@ -50,6 +50,7 @@
 use super::assign::{Assignment, CHUNK};
 use super::world::{End, RadiusClasses, WorldSkeleton};
 use crate::anatomy::template::BoneKind;
+use crate::cloud::grid::NearGrid;
 use crate::geometry::{Bone, BoneGradient, PreparedBone};
 use crate::math::{Quat, Vec3};
 use rayon::prelude::*;
@@ -342,9 +343,10 @@ impl RangePrior {
 /// smoothly with it (24 on the cone: 4 stations along the axis × 6 around it; 4 on each cap:
 /// its pole and 3 directions 50° off it). A sample hidden inside another bone is skipped.
 /// Each visible sample contributes `weight · max(0, |s − q| − slack)` with `q` the nearest
-/// data point (k-d tree, re-queried at every evaluation) and `slack`
-/// [`OCCUPANCY_SLACK`] times the data's median nearest-neighbour spacing, so a bone lying on
-/// the data pays nothing (no pull towards dense spots);
+/// data point (k-d tree, re-queried at every evaluation; a sample that the solver's
+/// [`NearGrid`] finds within the slack skips the query, since its term is zero either way)
+/// and `slack` [`OCCUPANCY_SLACK`] times the data's median nearest-neighbour spacing, so a
+/// bone lying on the data pays nothing (no pull towards dense spots);
 /// `weight² = density × area / 32`, the number of points the sample's share of the bone would
 /// carry at the statue's average density, so a bone fully off the data costs like that many
 /// points at that distance.
@@ -353,6 +355,9 @@ pub struct OccupancyTerm<'a> {
     /// `weight` of each bone's samples (same order as `bones`).
     pub weights: &'a [f64],
     pub tree: &'a kiddo::ImmutableKdTree<f32, 3>,
+    /// The same points in a grid ([`NearGrid`]): a sample it finds a point near is within
+    /// the slack without a query of the tree (the same residuals bit for bit).
+    pub grid: Option<&'a NearGrid>,
     pub positions: &'a [Vec3],
     /// Distance under which a sample counts as lying on the data.
     pub slack: f32,
@@ -449,7 +454,7 @@ impl OccupancyTerm<'_> {
                     .any(|(o, (pb, c))| {
                         o != b && (s - c.0).length_squared() <= c.1 && pb.sdf_fast(s) < -tol
                     });
-                if hidden {
+                if hidden || self.grid.is_some_and(|g| g.within_below(s, self.slack)) {
                     out.push((0.0, Vec3::ZERO, 0.0));
                     continue;
                 }

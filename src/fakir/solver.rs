@@ -14,6 +14,7 @@ use super::lm::{
 };
 use super::world::{End, RadiusClasses, WorldSkeleton};
 use crate::anatomy::template::BoneKind;
+use crate::cloud::grid::NearGrid;
 use crate::geometry::{Bone, PreparedBone};
 use crate::math::Vec3;
 use rayon::prelude::*;
@@ -158,6 +159,9 @@ pub struct Solver<'p> {
     assigned_bones: Vec<Bone>,
     /// k-d tree of the points the solver started with (for the free-cap term).
     tree: Option<kiddo::ImmutableKdTree<f32, 3>>,
+    /// The same points in a grid of cells of the occupancy slack ([`NearGrid`]): samples
+    /// near the data skip the tree's query.
+    grid: Option<NearGrid>,
     tree_points: Vec<Vec3>,
     /// Median distance between a point and its nearest neighbour (sampled).
     pub spacing: f32,
@@ -231,6 +235,7 @@ impl<'p> Solver<'p> {
         let arr: Vec<[f32; 3]> = tree_points.iter().map(|p| p.to_array()).collect();
         let tree = kiddo::ImmutableKdTree::new_from_slice(&arr).ok();
         let spacing = tree.as_ref().map_or(0.0, |t| median_spacing(t, &arr));
+        let grid = NearGrid::new(&tree_points, OCCUPANCY_SLACK * spacing);
         Solver {
             size,
             classes,
@@ -252,6 +257,7 @@ impl<'p> Solver<'p> {
             trunk,
             absent: vec![false; n],
             tree,
+            grid,
             tree_points,
             spacing,
             rows: RowCache::default(),
@@ -553,6 +559,7 @@ impl<'p> Solver<'p> {
                             bones: &occupied,
                             weights: &weights,
                             tree,
+                            grid: self.grid.as_ref(),
                             positions: &self.tree_points,
                             slack: OCCUPANCY_SLACK * self.spacing,
                         }),
@@ -958,12 +965,20 @@ impl<'p> Solver<'p> {
                 {
                     continue;
                 }
+                count += 1;
+                // Nearer than the spacing: the term is zero (the grid's "yes" is exact).
+                if self
+                    .grid
+                    .as_ref()
+                    .is_some_and(|g| g.within_below(sp, self.spacing))
+                {
+                    continue;
+                }
                 let nn = tree
                     .query(&sp.to_array())
                     .nearest_one::<kiddo::SquaredEuclidean<f32>>()
                     .execute();
                 sum += (nn.distance.sqrt() - self.spacing).max(0.0) as f64;
-                count += 1;
             }
         }
         if count == 0 { 0.0 } else { sum / count as f64 }
@@ -1075,6 +1090,7 @@ struct SeedContext<'a> {
 fn seed_eval(
     a: &Assignment,
     tree: &kiddo::ImmutableKdTree<f32, 3>,
+    grid: Option<&NearGrid>,
     spacing: f32,
     limb: &[PreparedBone],
     ctx: &SeedContext,
@@ -1111,6 +1127,10 @@ fn seed_eval(
                     .enumerate()
                     .any(|(o, q)| o != x && q.sdf_fast(sp) < 0.0)
             {
+                continue;
+            }
+            // Nearer than the spacing: no cost (the grid's "yes" is exact).
+            if grid.is_some_and(|g| g.within_below(sp, spacing)) {
                 continue;
             }
             let nn = tree
@@ -1177,7 +1197,7 @@ impl Solver<'_> {
                     })
                 })
                 .collect();
-            let (a, spacing) = (&self.assignment, self.spacing);
+            let (a, spacing, grid) = (&self.assignment, self.spacing, self.grid.as_ref());
             let evaluated: Vec<SeedCandidate> = jobs
                 .par_iter()
                 .map(|&(d, l, seed)| {
@@ -1195,7 +1215,7 @@ impl Solver<'_> {
                             Bone::new(c1, bj.r1, c2, bj.r2).prepare()
                         })
                         .collect();
-                    let (dist, mut cost) = seed_eval(a, tree, spacing, &limb, ctx, seed);
+                    let (dist, mut cost) = seed_eval(a, tree, grid, spacing, &limb, ctx, seed);
                     // The prior: leaving the rest direction (relative to the parent) costs up
                     // to `SEED_PRIOR` of what the whole limb could gain.
                     let area: f32 = limb.iter().map(|x| x.bone.area()).sum();
