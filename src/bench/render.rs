@@ -223,8 +223,11 @@ impl Offscreen {
         self.wait();
     }
 
-    /// Frames until the statue's splats exist; the number of points drawn. Errors (labelled
-    /// `name`) when they never appear.
+    /// Frames until the statue's splats exist and show in a screenshot; the number of points
+    /// drawn. Errors (labelled `name`) when they never appear. The splats can exist some
+    /// frames before they show: the renderer compiles their pipeline in the background, and
+    /// on a loaded machine under software Vulkan a first screenshot once showed only the
+    /// background (`statue_fraction` 0).
     pub fn until_drawn(&mut self, name: &str) -> Result<usize> {
         for _ in 0..PATIENCE {
             self.frame();
@@ -234,7 +237,15 @@ impl Offscreen {
                 .query::<&SplatPoints>()
                 .single(self.app.world())
             {
-                return Ok(p.count);
+                let count = p.count;
+                for _ in 0..PATIENCE {
+                    if statue_fraction(self, name)? > 0.0 {
+                        return Ok(count);
+                    }
+                }
+                return Err(Error::input(format!(
+                    "{name}: the statue's splats never showed on the screen"
+                )));
             }
         }
         Err(Error::input(format!(

@@ -6,10 +6,13 @@
 //! costs nothing. Most samples of a bone lying on the data are that near, and for them the
 //! nearest point itself is never needed. The grid answers that question (the points of the 27
 //! cells around `q` are tested, `r` at most one cell) more cheaply than a nearest-point query
-//! of the k-d tree; the callers query the tree only when the grid says no. Since the grid answers "within" only for a radius a little under the slack
-//! ([`NearGrid::within_below`]), a "yes" means that the tree's nearest point is within the
-//! slack too, whatever the rounding of either distance: the callers' sums are the same bits as
-//! with the tree alone.
+//! of the k-d tree; the callers query the tree only when the grid says no. Since the grid
+//! answers "within" only for a radius a little under the slack ([`NearGrid::within_below`]),
+//! a "yes" means that the tree's nearest point is within the slack too, whatever the rounding
+//! of either distance: the callers' sums are the same bits as with the tree alone.
+//!
+//! (`cloud::normals` has a voxel grid of its own for its visibility rays: occupancy bits and
+//! mean normals per voxel, a different question.)
 //!
 //! Inputs: points, a cell size. Output: `any_within(q, r)`. Built in O(n) (a counting sort of
 //! the points into cells); `None` when there are no points, the cell is not a positive finite
@@ -47,9 +50,9 @@ impl NearGrid {
         if points.iter().any(|p| !p.is_finite()) {
             return None;
         }
-        let box_ = super::Aabb::of(points)?;
+        let bounds = super::Aabb::of(points)?;
         let inv_cell = 1.0 / cell;
-        let size = box_.size() * inv_cell;
+        let size = bounds.size() * inv_cell;
         let dim = |x: f32| x.floor() as usize + 1;
         let dims = [dim(size.x), dim(size.y), dim(size.z)];
         let cells = dims[0]
@@ -59,7 +62,7 @@ impl NearGrid {
             return None;
         }
         let mut grid = NearGrid {
-            origin: box_.min,
+            origin: bounds.min,
             cell,
             inv_cell,
             dims,
@@ -79,11 +82,6 @@ impl NearGrid {
             next[c] += 1;
         }
         Some(grid)
-    }
-
-    /// Edge of a cell.
-    pub fn cell(&self) -> f32 {
-        self.cell
     }
 
     /// Integer coordinates of the cell holding `p`, clamped into the grid.
@@ -115,15 +113,13 @@ impl NearGrid {
         let r2 = r * r;
         // Outside the box by more than `r` on some axis: no point can be that near.
         let u = (q - self.origin) * self.inv_cell;
-        let hi = |n: usize| n as f32;
         let margin = r * self.inv_cell;
-        if u.x < -margin
-            || u.y < -margin
-            || u.z < -margin
-            || u.x > hi(self.dims[0]) + margin
-            || u.y > hi(self.dims[1]) + margin
-            || u.z > hi(self.dims[2]) + margin
-        {
+        let top = Vec3::new(
+            self.dims[0] as f32,
+            self.dims[1] as f32,
+            self.dims[2] as f32,
+        ) + margin;
+        if u.cmplt(Vec3::splat(-margin)).any() || u.cmpgt(top).any() {
             return false;
         }
         let [cx, cy, cz] = self.coords(q);

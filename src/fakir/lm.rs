@@ -355,8 +355,8 @@ pub struct OccupancyTerm<'a> {
     /// `weight` of each bone's samples (same order as `bones`).
     pub weights: &'a [f64],
     pub tree: &'a kiddo::ImmutableKdTree<f32, 3>,
-    /// The same points in a grid ([`NearGrid`]): a sample it finds a point near is within
-    /// the slack without a query of the tree (the same residuals bit for bit).
+    /// The same points in a grid ([`NearGrid`]): a sample with a point of the grid near it
+    /// is within the slack without a query of the tree (the same residuals bit for bit).
     pub grid: Option<&'a NearGrid>,
     pub positions: &'a [Vec3],
     /// Distance under which a sample counts as lying on the data.
