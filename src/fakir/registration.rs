@@ -1687,8 +1687,27 @@ fn examine_support(
 /// length guards an end stretched over its parent (308's lost hand: 1.88 times its mirror's
 /// length, coverage 1.0, lost with its forearm), and a statue that lost both hands has no
 /// present mirror (seed 122's right hand, coverage 1.0, 539 points against 1,114). The
-/// fed-and-covered end is kept before the both-sides-broken examination below. One work unit
-/// per bone, and one per bone examined again.
+/// fed-and-covered end is kept before the both-sides-broken examination below. **A stump**
+/// (our choice; last, on every verdict, the checks' of level 5 included): the first lost bone
+/// of a limb, its parent present, not known lost and not taken by the laid-over-parent rule,
+/// is kept when its support reaches [`STUMP_REACH`] (0.3 to 0.5) of its length from its first
+/// joint and its parent is not stretched past its mirror ([`is_stump`]); the bones below it
+/// stay lost, and [`Fit::partial`] names it (its support does not reach through it). The
+/// parent's end sphere explains a short stump's points nearly as well as the bone does, so
+/// the redundancy test takes it with what it carried; where the support reaches tells them
+/// apart. Measured with temporary prints (2026-12-02, `synth --seed N --rigid --height 1.7
+/// --cut bone:B@F`, 30k points, `register`'s defaults): stumps taken lost reached 0.4 (seed
+/// 304's shin cut at 0.2), 0.3 (308's forearm at 0.6), 0.5 (332's shin at 0.3); truly lost
+/// bones 0.0 (304's and 332's feet, 334's shin), 0.6 (313's shin below a thigh cut at 0.5,
+/// laid over another part), 0.8 (120's left hand cut at the wrist) and 1.0 (308's hand,
+/// stretched to 1.88 times its mirror over the trunk). The healthy right hand of the complete
+/// seed 10, hanging beside a forearm stretched over it to 1.85 times its mirror's length,
+/// reaches 0.3: kept, it would stop the dangling-end check from mending that fit, hence the
+/// parent's guard. The laid-over-parent rule's hands (seeds 98, 120, 309: 0.4, 0.8, 0.4)
+/// lie over their parents' far half, the parent shortened to make room, so they stay lost
+/// (309's hand, cut at half its length, with them). A trial with the reach 0.3 to 0.9 and no
+/// guard (2026-11-29) lost seed 10's mended fit. One work unit per bone, and one per bone
+/// examined again.
 fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result<Vec<bool>> {
     let t = s.world.template.clone();
     let trunk = super::solver::trunk_bones(&t);
@@ -1698,6 +1717,8 @@ fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result
     // Bones taken lost by the redundancy test alone (not bare, not laid over their parent,
     // not empty).
     let mut only_redundant = vec![false; nb];
+    // Bones taken by the laid-over-parent rule (never kept as a stump).
+    let mut over_taken = vec![false; nb];
     // Parents come before their children in a template's bone order.
     for b in (0..nb).rev() {
         let limb = t.bones[b].kind != BoneKind::Block && !trunk[b];
@@ -1738,6 +1759,7 @@ fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result
                 .is_some_and(|e| e < limit * radius);
         lost[b] = bare || over_parent || (!hangs_from_trunk && empty) || redundant;
         only_redundant[b] = redundant;
+        over_taken[b] = over_parent;
         // Covered through: a limb bone carrying others, taken lost though it holds points,
         // lies against another part when the scan covers it and every bone below it from end
         // to end and none of their axes is buried in the other bones (a forearm resting on a
@@ -1783,13 +1805,58 @@ fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result
         if again {
             let bone = s.world.bones()[b];
             let radius = 0.5 * (bone.r1 + bone.r2) as f64;
-            lost[b] = s.members_of(&[b]) == 0
-                || laid_over_parent(s, support, (&mirror, &trunk), &lost, b, REDUNDANT * radius);
+            let empty = s.members_of(&[b]) == 0;
+            let over = !empty
+                && laid_over_parent(s, support, (&mirror, &trunk), &lost, b, REDUNDANT * radius);
+            lost[b] = empty || over;
+            over_taken[b] = over;
             s.unit().map_err(cancelled)?;
+        }
+    }
+    // A stump: the first lost bone of a limb whose support reaches part-way along it is
+    // kept (partial), the bones below it lost.
+    let first: Vec<bool> = (0..nb)
+        .map(|b| lost[b] && !known[b] && t.bones[b].parent.is_some_and(|p| !lost[p]))
+        .collect();
+    for b in 0..nb {
+        if first[b] && !over_taken[b] && is_stump(s, support, &mirror, &lost, b) {
+            lost[b] = false;
         }
     }
     Ok(lost)
 }
+
+/// The stump exception of [`lost_limbs`] for bone `b`, the first lost bone of a limb (its
+/// parent present) not taken by the laid-over-parent rule: its support reaches
+/// [`STUMP_REACH`] of its length from its first joint (counted in [`super::support::BINS`]
+/// axial bins without a gap), and its parent is not longer than [`FED_LENGTH`]'s upper end
+/// times its mirror's (when the mirror is present). Such a bone was cut part-way: its stump's
+/// points lie along its first part, and its parent's end sphere explains them nearly as well
+/// as the bone does, so the redundancy test took it; the bones below it are lost. A truly lost
+/// bone's support reaches 0.0–0.2 (nothing past the joint), or 0.6–1.0 when FAKIR laid it
+/// over another part; and a parent stretched over the bone (a forearm reaching the tip of
+/// its hand, the hand hanging beside it) leaves the bone a stub of support at its root.
+fn is_stump(
+    s: &Solver,
+    support: &[BoneSupport],
+    mirror: &[Option<usize>],
+    lost: &[bool],
+    b: usize,
+) -> bool {
+    let t = &s.world.template;
+    let Some(p) = t.bones[b].parent else {
+        return false;
+    };
+    let l = &s.world.lengths;
+    let parent_stretched = mirror[p]
+        .filter(|&m| !lost[m])
+        .is_some_and(|m| l[p] > FED_LENGTH.1 * l[m]);
+    (STUMP_REACH.0..=STUMP_REACH.1).contains(&support[b].reach) && !parent_stretched
+}
+
+/// The reach of its support (a share of its length, from its first joint) within which the
+/// first lost bone of a limb is a stump and kept (`is_stump`).
+pub const STUMP_REACH: (f32, f32) = (0.3, 0.5);
 
 /// The laid-over-parent rule of [`lost_limbs`]: last bone `b` without support (at its
 /// expected size) whose mirror has support, shorter with its parent than their mirrors (a cut
