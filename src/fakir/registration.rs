@@ -323,7 +323,10 @@
 //!    `lost_limbs`). A hand or foot laid over its parent is lost too, and one whose mirror
 //!    was taken lost is examined again (both hands or both feet broken: `lost_limbs`); one
 //!    taken lost by the redundancy test alone is kept when it has the points, coverage and
-//!    length of a present end beside a present mirror (fed and covered: `lost_limbs`).
+//!    length of a present end beside a present mirror (fed and covered: `lost_limbs`). The
+//!    first lost bone of a limb whose support reaches 0.3 to 0.5 of its length from its
+//!    first joint is kept as a stump, the bones below it lost (`is_stump`: not a hand laid
+//!    over its parent, nor below a parent stretched past its mirror).
 //!    Lost bones get the expected size and pose of the thesis' ch. 5 (the healthy mirror
 //!    limb's, else the template's), take no points, and the rest of the skeleton is refined
 //!    without them (`final_iterations` whole-skeleton iterations, each limb fitted up to
