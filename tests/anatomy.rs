@@ -235,6 +235,22 @@ fn template_validation_errors_are_clear() {
         "must start at the root",
     );
     expect_config_error("this is not toml = = =", "invalid template");
+    // The bust's lost limbs must be bones of the template.
+    let with_bust =
+        |names: &str| MINI.replace("root = \"a\"", &format!("root = \"a\"\nbust = [{names}]"));
+    expect_config_error(&with_bust("\"bc\", \"hand\""), "bust: unknown bone 'hand'");
+    let t = Template::from_toml(&with_bust("\"bc\""), Path::new("mini.toml")).unwrap();
+    assert_eq!(t.bust, ["bc"]);
+    assert!(
+        Template::from_toml(MINI, Path::new("mini.toml"))
+            .unwrap()
+            .bust
+            .is_empty()
+    );
+    assert_eq!(
+        Template::builtin("human").unwrap().bust,
+        ["l_upper_arm", "r_upper_arm", "l_thigh", "r_thigh"]
+    );
     // Two joints ending each other's bones: a cycle the root never reaches.
     let cycle = format!(
         "{MINI}\n[[joints]]\nname = \"x\"\nat = [1, 0, 0]\n[[joints]]\nname = \"y\"\nat = [2, 0, 0]\n\

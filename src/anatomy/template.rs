@@ -60,6 +60,10 @@ pub struct TemplateFile {
     pub joints: Vec<JointSpec>,
     pub bones: Vec<BoneSpec>,
     pub chains: Vec<ChainSpec>,
+    /// The limb bones a bust of this figure has lost, each with the bones it carries (see
+    /// [`Template::bust`]). Optional.
+    #[serde(default)]
+    pub bust: Vec<String>,
 }
 
 /// A joint of a template file.
@@ -169,6 +173,10 @@ pub struct Template {
     pub chains: Vec<ChainDef>,
     /// Height of the rest model along `+Y`, radii included.
     pub height: f32,
+    /// The limb bones a portrait bust of this figure has lost, each with the bones it
+    /// carries (the human's upper arms and thighs): the lost set of the bust hypothesis of
+    /// [`crate::fakir::bust`]. Empty: the template has no bust hypothesis.
+    pub bust: Vec<String>,
 }
 
 impl Template {
@@ -488,6 +496,11 @@ impl Template {
                 return Err(err(format!("bone '{}' is in no chain", b.name)));
             }
         }
+        for name in &file.bust {
+            if !bones.iter().any(|b| b.name == *name) {
+                return Err(err(format!("bust: unknown bone '{name}'")));
+            }
+        }
         let joints: Vec<JointDef> = file
             .joints
             .iter()
@@ -513,6 +526,7 @@ impl Template {
             bones,
             chains,
             height: hi - lo,
+            bust: file.bust,
         })
     }
 

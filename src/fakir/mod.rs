@@ -11,10 +11,12 @@
 //! | Algorithm 1 on a chain; whole-skeleton order with backtracking | [`schedule`] |
 //! | automatic initial placement (PCA, candidate orientations) | [`init`] |
 //! | which bones the scan covers (support), lost limbs and their completion | [`support`] |
+//! | the bust hypothesis (a portrait bust fitted without its limbs) | [`bust`] |
 //! | the working units (a power-of-two scale, a shift for far clouds) | [`frame`] |
 //! | levels, the resumable `step(budget)` registration | [`registration`] |
 
 pub mod assign;
+pub mod bust;
 pub mod frame;
 pub mod init;
 pub mod lm;

@@ -341,7 +341,14 @@
 //!    40–59) the lost set is right on 17. The automatic detection is weak on real scans and
 //!    on fits that went wrong: on 32 complete synthetic statues it flags a hand on 3 (seeds
 //!    10, 12 and 15, the last laid off the statue by its fit); on the *Venus de Milo* it
-//!    finds the left arm only, and none of the bust's limbs.
+//!    finds the left arm only, and none of the bust's limbs on its own.
+//! 7. **The bust hypothesis** ([`super::bust`], after the levels above): a whole fit squeezed
+//!    into its points (its figure would stand over [`super::bust::SQUEEZE`] times taller
+//!    than they reach) is registered again, levels 0–6, with the template's bust limbs lost
+//!    from the start; that fit is the result when it explains the points those limbs had
+//!    taken ([`super::bust::limb_excess`] under [`super::bust::EXPLAINED`]) at a mean
+//!    distance under [`super::bust::COST`] times the whole fit's. The wreathed bust then
+//!    reports both arms and both legs missing.
 //!
 //! ## Incremental by design
 //! The algorithm is written as plain sequential code whose elementary steps are **work
@@ -730,8 +737,36 @@ fn working_frame(cloud: &PointCloud) -> Option<WorkingFrame> {
     WorkingFrame::of(&cloud.positions).filter(|f| !f.is_identity())
 }
 
-/// [`register`] in the working units `frame` ([`working_frame`]; `None`: the cloud's).
+/// [`register`] in the working units `frame` ([`working_frame`]; `None`: the cloud's), with
+/// the bust hypothesis ([`super::bust`]): a whole fit squeezed into its points is registered
+/// again without the template's bust limbs, and that fit is kept when it explains the points
+/// the limbs had taken at a mean distance not far above the whole fit's.
 fn register_in(
+    frame: Option<WorkingFrame>,
+    cloud: &PointCloud,
+    template: Arc<Template>,
+    opts: &RegistrationOptions,
+    pause: &mut dyn Pause,
+) -> Result<Fit> {
+    let whole = register_once(frame, cloud, template.clone(), opts, pause)?;
+    let Some(bust_opts) = super::bust::hypothesis(&template, opts) else {
+        return Ok(whole);
+    };
+    if super::bust::squeeze(&whole, &cloud.positions) <= super::bust::SQUEEZE {
+        return Ok(whole);
+    }
+    let bust = register_once(frame, cloud, template, &bust_opts, pause)?;
+    let explained =
+        super::bust::limb_excess(&whole, &bust, &cloud.positions)? < super::bust::EXPLAINED;
+    if explained && bust.mean_distance < super::bust::COST * whole.mean_distance {
+        Ok(bust)
+    } else {
+        Ok(whole)
+    }
+}
+
+/// One registration of [`register_in`] (no bust hypothesis).
+fn register_once(
     frame: Option<WorkingFrame>,
     cloud: &PointCloud,
     template: Arc<Template>,

@@ -593,6 +593,7 @@ pub fn chain_template(name: &str, lengths: &[f32], radii: &[f32]) -> Result<Temp
             bones: (1..=lengths.len()).map(|k| format!("b{k}")).collect(),
             mirror: None,
         }],
+        bust: Vec::new(),
     };
     Template::from_file(file, Path::new(name))
 }
