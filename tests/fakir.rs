@@ -1300,7 +1300,7 @@ fn register_posed(s: &SynthStatue) -> pygmalion::fakir::Fit {
 }
 
 /// The automatic registration with default options, as `register` runs it.
-fn register_as_the_cli(s: &SynthStatue) -> pygmalion::fakir::Fit {
+pub(crate) fn register_as_the_cli(s: &SynthStatue) -> pygmalion::fakir::Fit {
     register_with(s, Default::default())
 }
 

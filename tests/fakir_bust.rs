@@ -5,9 +5,9 @@ use std::sync::Arc;
 
 use crate::common::on_one_thread;
 use pygmalion::anatomy::{Skeleton, Template};
+use pygmalion::fakir::Fit;
 use pygmalion::fakir::bust::{EXPLAINED, SQUEEZE, limb_excess, squeeze};
 use pygmalion::fakir::support::lost_from_names;
-use pygmalion::fakir::{Fit, Registration};
 use pygmalion::math::Vec3;
 use pygmalion::synth::{Cut, SynthOptions, SynthStatue, generate};
 
@@ -131,14 +131,7 @@ fn a_portrait_bust_is_fitted_without_its_limbs() {
     // statue's size then; the guard at 3%).
     on_one_thread(|| {
         let s = human(6, true, bust_cuts());
-        let fit = Registration::new(
-            Arc::new(s.cloud.clone()),
-            s.truth.template.clone(),
-            Default::default(),
-        )
-        .unwrap()
-        .run_to_convergence()
-        .unwrap();
+        let fit = crate::fakir::register_as_the_cli(&s);
         let t = &fit.skeleton.template;
         let limbs = lost_from_names(t, &t.bust).unwrap();
         for (b, bone) in t.bones.iter().enumerate() {

@@ -140,8 +140,11 @@ pub fn squeeze(fit: &Fit, positions: &[Vec3]) -> f32 {
 fn nearest_surface(bones: &[PreparedBone], p: Vec3, keep: impl Fn(usize) -> bool) -> (usize, f32) {
     let mut best = (usize::MAX, f32::INFINITY);
     for (k, b) in bones.iter().enumerate() {
+        if !keep(k) {
+            continue;
+        }
         let d = b.sdf_fast(p).abs();
-        if keep(k) && d < best.1 {
+        if d < best.1 {
             best = (k, d);
         }
     }
@@ -170,9 +173,8 @@ fn bones_of(fit: &Fit) -> (Vec<PreparedBone>, Vec<bool>) {
 /// go to the nearest surface, not by `whole`'s labels: the normal-constrained assignment
 /// hands a limb points of other parts that face it (measured on 2026-12-02: by the labels the
 /// wreathed bust 3.7%, *Cheburashka* 5.9% and the synthetic bust of seed 2 4.9%; by the nearest
-/// surfaces 2.2%, 5.5% and 3.1%). A
-/// limb no point lies nearest to counts 0. Errors only on bust names the template does not
-/// have.
+/// surfaces 2.2%, 5.5% and 3.1%). A limb no point lies nearest to counts 0. Errors only on
+/// bust names that are not limb bones of the template ([`lost_from_names`]).
 pub fn limb_excess(whole: &Fit, bust: &Fit, positions: &[Vec3]) -> Result<f32> {
     let t: &Arc<Template> = &whole.skeleton.template;
     let pts: Vec<Vec3> = figure(whole, positions).collect();
