@@ -109,14 +109,14 @@ fn a_standing_figures_legs_are_not_explained_by_its_trunk() {
     let t = s.truth.template.clone();
     let nb = t.bones.len();
     let whole = as_fit(&s.truth, s.cloud.len(), vec![false; nb]);
-    let same = limb_excess(&whole, &whole, &s.cloud.positions).unwrap();
+    let same = limb_excess(&whole, &whole, &s.cloud.positions, &t.bust).unwrap();
     assert!(same < 1e-3, "same bones: {same}");
     let bust = as_fit(
         &s.truth,
         s.cloud.len(),
         lost_from_names(&t, &t.bust).unwrap(),
     );
-    let e = limb_excess(&whole, &bust, &s.cloud.positions).unwrap();
+    let e = limb_excess(&whole, &bust, &s.cloud.positions, &t.bust).unwrap();
     assert!(e > 2.0 * EXPLAINED, "limbs removed: {e}");
 }
 

@@ -21,6 +21,7 @@ mod cloud_ply;
 mod fakir;
 mod fakir_bust;
 mod fakir_frame;
+mod fakir_pair;
 mod geometry_bone;
 mod kiosk_app;
 mod kiosk_attract;

@@ -166,16 +166,16 @@ fn bones_of(fit: &Fit) -> (Vec<PreparedBone>, Vec<bool>) {
     (bones, present)
 }
 
-/// The largest, over the bust's limbs ([`Template::bust`], each with the bones it carries),
-/// of the mean distance of the figure's points that lie nearest to that limb's surface in
-/// `whole` to the nearest surface of `bust`'s bones (its missing ones left out), as a share
-/// of the diagonal of the figure's points; both fits registered on `positions`. The points
-/// go to the nearest surface, not by `whole`'s labels: the normal-constrained assignment
-/// hands a limb points of other parts that face it (measured on 2026-12-02: by the labels the
-/// wreathed bust 3.7%, *Cheburashka* 5.9% and the synthetic bust of seed 2 4.9%; by the nearest
-/// surfaces 2.2%, 5.5% and 3.1%). A limb no point lies nearest to counts 0. Errors only on
-/// bust names that are not limb bones of the template ([`lost_from_names`]).
-pub fn limb_excess(whole: &Fit, bust: &Fit, positions: &[Vec3]) -> Result<f32> {
+/// The largest, over the limbs named in `limbs` (for a bust its [`Template::bust`], each with
+/// the bones it carries), of the mean distance of the figure's points that lie nearest to
+/// that limb's surface in `whole` to the nearest surface of `bust`'s bones (its missing ones
+/// left out), as a share of the diagonal of the figure's points; both fits registered on
+/// `positions`. The points go to the nearest surface, not by `whole`'s labels: the
+/// normal-constrained assignment hands a limb points of other parts that face it (measured
+/// on 2026-12-02: by the labels the wreathed bust 3.7%, *Cheburashka* 5.9% and the synthetic
+/// bust of seed 2 4.9%; by the nearest surfaces 2.2%, 5.5% and 3.1%). A limb no point lies nearest to counts 0. Errors only on
+/// names that are not limb bones of the template ([`lost_from_names`]).
+pub fn limb_excess(whole: &Fit, bust: &Fit, positions: &[Vec3], limbs: &[String]) -> Result<f32> {
     let t: &Arc<Template> = &whole.skeleton.template;
     let pts: Vec<Vec3> = figure(whole, positions).collect();
     let Some(bbox) = Aabb::of(&pts) else {
@@ -187,8 +187,7 @@ pub fn limb_excess(whole: &Fit, bust: &Fit, positions: &[Vec3]) -> Result<f32> {
     }
     let (whole_bones, whole_present) = bones_of(whole);
     let (bust_bones, bust_present) = bones_of(bust);
-    let limbs: Vec<Vec<bool>> = t
-        .bust
+    let limbs: Vec<Vec<bool>> = limbs
         .iter()
         .map(|name| lost_from_names(t, std::slice::from_ref(name)))
         .collect::<Result<_>>()?;

@@ -20,6 +20,7 @@ pub mod bust;
 pub mod frame;
 pub mod init;
 pub mod lm;
+pub mod pair;
 pub mod registration;
 pub mod schedule;
 pub mod solver;

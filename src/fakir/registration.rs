@@ -341,7 +341,8 @@
 //!    40–59) the lost set is right on 17. The automatic detection is weak on real scans and
 //!    on fits that went wrong: on 32 complete synthetic statues it flags a hand on 3 (seeds
 //!    10, 12 and 15, the last laid off the statue by its fit); on the *Venus de Milo* it
-//!    finds the left arm only, and none of the bust's limbs on its own.
+//!    finds the left arm only (level 8 finds the right one), and none of the bust's limbs
+//!    on its own (level 7 does).
 //! 7. **The bust hypothesis** ([`super::bust`], after the levels above): a whole fit squeezed
 //!    into its points (its figure would stand over [`super::bust::SQUEEZE`] times taller
 //!    than they reach) is registered again, levels 0–6, with the template's bust limbs lost
@@ -349,6 +350,12 @@
 //!    taken ([`super::bust::limb_excess`] under [`super::bust::EXPLAINED`]) at a mean
 //!    distance under [`super::bust::COST`] times the whole fit's. The wreathed bust then
 //!    reports both arms and both legs missing.
+//! 8. **The pair hypothesis** ([`super::pair`], when no bust fit was kept): a whole fit that
+//!    lost an upper arm or a thigh with all it carries, its mirror limb whole, is registered
+//!    again with both lost from the start; that fit is the result when it explains the
+//!    points the mirror had taken ([`super::bust::limb_excess`] under
+//!    [`super::pair::EXPLAINED`]) at a mean distance under [`super::pair::COST`] times the
+//!    whole fit's. The *Venus de Milo* then reports both arms missing.
 //!
 //! ## Incremental by design
 //! The algorithm is written as plain sequential code whose elementary steps are **work
@@ -740,7 +747,9 @@ fn working_frame(cloud: &PointCloud) -> Option<WorkingFrame> {
 /// [`register`] in the working units `frame` ([`working_frame`]; `None`: the cloud's), with
 /// the bust hypothesis ([`super::bust`]): a whole fit squeezed into its points is registered
 /// again without the template's bust limbs, and that fit is kept when it explains the points
-/// the limbs had taken at a mean distance not far above the whole fit's.
+/// the limbs had taken at a mean distance not far above the whole fit's; then (no bust fit
+/// kept) the pair hypothesis ([`super::pair`]): a fit that lost an upper arm or a thigh
+/// beside a whole mirror is registered again with both lost, kept on the same two tests.
 fn register_in(
     frame: Option<WorkingFrame>,
     cloud: &PointCloud,
@@ -749,23 +758,35 @@ fn register_in(
     pause: &mut dyn Pause,
 ) -> Result<Fit> {
     let whole = register_once(frame, cloud, template.clone(), opts, pause)?;
-    let Some(bust_opts) = super::bust::hypothesis(&template, opts) else {
-        return Ok(whole);
-    };
-    if super::bust::squeeze(&whole, &cloud.positions) <= super::bust::SQUEEZE {
-        return Ok(whole);
+    if let Some(bust_opts) = super::bust::hypothesis(&template, opts)
+        && super::bust::squeeze(&whole, &cloud.positions) > super::bust::SQUEEZE
+    {
+        let bust = register_once(frame, cloud, template.clone(), &bust_opts, pause)?;
+        let excess = super::bust::limb_excess(&whole, &bust, &cloud.positions, &template.bust)?;
+        if excess < super::bust::EXPLAINED
+            && bust.mean_distance < super::bust::COST * whole.mean_distance
+        {
+            return Ok(bust);
+        }
     }
-    let bust = register_once(frame, cloud, template, &bust_opts, pause)?;
-    let explained =
-        super::bust::limb_excess(&whole, &bust, &cloud.positions)? < super::bust::EXPLAINED;
-    if explained && bust.mean_distance < super::bust::COST * whole.mean_distance {
-        Ok(bust)
-    } else {
-        Ok(whole)
+    if let Some((pair_opts, mirror)) = super::pair::hypothesis(&template, opts, &whole) {
+        let pair = register_once(frame, cloud, template, &pair_opts, pause)?;
+        let excess = super::bust::limb_excess(
+            &whole,
+            &pair,
+            &cloud.positions,
+            std::slice::from_ref(&mirror),
+        )?;
+        if excess < super::pair::EXPLAINED
+            && pair.mean_distance < super::pair::COST * whole.mean_distance
+        {
+            return Ok(pair);
+        }
     }
+    Ok(whole)
 }
 
-/// One registration of [`register_in`] (no bust hypothesis).
+/// One registration of [`register_in`] (no bust or pair hypothesis).
 fn register_once(
     frame: Option<WorkingFrame>,
     cloud: &PointCloud,
