@@ -5,11 +5,37 @@ use std::sync::Arc;
 
 use crate::common::on_one_thread;
 use pygmalion::anatomy::{Skeleton, Template};
-use pygmalion::fakir::Fit;
 use pygmalion::fakir::bust::{EXPLAINED, SQUEEZE, limb_excess, squeeze};
+use pygmalion::fakir::solver::{Cancelled, Pause, Solver};
 use pygmalion::fakir::support::lost_from_names;
+use pygmalion::fakir::{Attempt, Fit, RegistrationOptions, register};
 use pygmalion::math::Vec3;
 use pygmalion::synth::{Cut, SynthOptions, SynthStatue, generate};
+
+/// A pause hook that records the attempts announced and, per attempt, the progress
+/// fraction of every solver unit.
+#[derive(Default)]
+struct Attempts {
+    attempts: Vec<Attempt>,
+    fractions: Vec<Vec<f32>>,
+}
+
+impl Pause for Attempts {
+    fn attempt(&mut self, attempt: Attempt) {
+        self.attempts.push(attempt);
+        self.fractions.push(Vec::new());
+    }
+
+    fn unit(&mut self, solver: Option<&Solver>) -> Result<(), Cancelled> {
+        if self.fractions.is_empty() {
+            self.fractions.push(Vec::new());
+        }
+        if let (Some(s), Some(f)) = (solver, self.fractions.last_mut()) {
+            f.push(s.activity.fraction);
+        }
+        Ok(())
+    }
+}
 
 /// `synth --seed SEED --height 1.7 --points 60000` in the rest pose (`rest`) or a random one,
 /// with `cuts`.
@@ -131,7 +157,24 @@ fn a_portrait_bust_is_fitted_without_its_limbs() {
     // statue's size then; the guard at 3%).
     on_one_thread(|| {
         let s = human(6, true, bust_cuts());
-        let fit = crate::fakir::register_as_the_cli(&s);
+        // Registered as the CLI does (its default options), through a hook that records the
+        // attempts and the progress fraction each solver unit reports.
+        let mut seen = Attempts::default();
+        let fit = register(
+            &s.cloud,
+            s.truth.template.clone(),
+            &RegistrationOptions::default(),
+            &mut seen,
+        )
+        .unwrap();
+        // The whole figure first, run to its end; then the bust, whose share starts again
+        // from 0 (the kiosk shows "looking for lost limbs" and a new bar).
+        assert_eq!(seen.attempts, [Attempt::Bust], "attempts");
+        let top = |f: &[f32]| f.iter().copied().fold(0.0f32, f32::max);
+        let (whole, bust) = (&seen.fractions[0], &seen.fractions[1]);
+        assert!(top(whole) > 0.8, "the whole fit reached {}", top(whole));
+        assert!(bust[0] < 0.2, "the bust's progress began at {}", bust[0]);
+        assert!(top(bust) > 0.8, "the bust fit reached {}", top(bust));
         let t = &fit.skeleton.template;
         let limbs = lost_from_names(t, &t.bust).unwrap();
         for (b, bone) in t.bones.iter().enumerate() {

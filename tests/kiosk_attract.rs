@@ -5,6 +5,7 @@ use bevy::input::InputPlugin;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
 use pygmalion::anatomy::{Pose, Template};
+use pygmalion::fakir::Attempt;
 use pygmalion::kiosk::attract::{AttractConfig, AttractPlugin, IdleState, attract_cycle};
 use pygmalion::kiosk::config::KioskConfig;
 use pygmalion::kiosk::ui::{
@@ -292,6 +293,7 @@ fn ui_shows_the_countdown_status_and_error_card() {
             StatueState::Fitting {
                 units: 17,
                 fraction: 0.4271,
+                attempt: Attempt::Whole,
             },
         ))
         .id();

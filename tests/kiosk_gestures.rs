@@ -11,6 +11,7 @@ use bevy::time::TimeUpdateStrategy;
 use bevy::ui::Interaction as UiInteraction;
 use bevy::window::CursorMoved;
 use pygmalion::anatomy::{Skeleton, Template};
+use pygmalion::fakir::Attempt;
 use pygmalion::kiosk::animate::SkinMethod;
 use pygmalion::kiosk::config::KioskConfig;
 use pygmalion::kiosk::gestures::{
@@ -697,7 +698,16 @@ fn friendly_names_and_status_lines() {
     assert_eq!(status_text(&StatueState::Loading, &texts), texts.loading);
     // Fitting: the share done as a whole percentage, rounded down (100 only when finished),
     // whatever the work-unit count; binding shows 100%.
-    let fitting = |units, fraction| status_text(&StatueState::Fitting { units, fraction }, &texts);
+    let fitting = |units, fraction| {
+        status_text(
+            &StatueState::Fitting {
+                units,
+                fraction,
+                attempt: Attempt::Whole,
+            },
+            &texts,
+        )
+    };
     assert_eq!(fitting(42, 0.5), format!("{} 50%", texts.fitting));
     assert_eq!(fitting(7, 0.5), fitting(9000, 0.5));
     assert_eq!(fitting(1, 0.0), format!("{} 0%", texts.fitting));
@@ -707,6 +717,20 @@ fn friendly_names_and_status_lines() {
         status_text(&StatueState::Binding, &texts),
         format!("{} 100%", texts.fitting)
     );
+    // A second registration without limbs found lost (a bust, an armless figure) says so,
+    // with its own share done.
+    for attempt in [Attempt::Bust, Attempt::Pair] {
+        let again = StatueState::Fitting {
+            units: 9000,
+            fraction: 0.25,
+            attempt,
+        };
+        assert_eq!(
+            status_text(&again, &texts),
+            format!("{} 25%", texts.fitting_again)
+        );
+        assert_ne!(texts.fitting_again, texts.fitting);
+    }
     assert_eq!(fitting_percent(f32::NAN), 0);
     assert_eq!(fitting_percent(-0.5), 0);
     assert_eq!(fitting_percent(1.5), 100);
@@ -717,7 +741,8 @@ fn friendly_names_and_status_lines() {
     assert_eq!(
         bar(StatueState::Fitting {
             units: 3,
-            fraction: 0.4271
+            fraction: 0.4271,
+            attempt: Attempt::Whole,
         }),
         Some(0.42)
     );
@@ -731,7 +756,8 @@ fn friendly_names_and_status_lines() {
         status_text(
             &StatueState::Fitting {
                 units: 3,
-                fraction: 0.25
+                fraction: 0.25,
+                attempt: Attempt::Whole,
             },
             &french
         ),

@@ -470,6 +470,7 @@ mod parts {
     use bevy::math::Vec3;
     use bevy::mesh::{Mesh, VertexAttributeValues};
     use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
+    use pygmalion::fakir::Attempt;
     use pygmalion::kiosk::render::{
         ATTRIBUTE_SPLAT_COLOR, ATTRIBUTE_SPLAT_INDEX, CORNERS, SPLAT_POINT_BYTES, bone_transform,
         bones_visible, budget_indices, capture_rgb, cone_geometry, pack_points, splat_mesh,
@@ -610,6 +611,7 @@ mod parts {
         let fitting = StatueState::Fitting {
             units: 3,
             fraction: 0.1,
+            attempt: Attempt::Whole,
         };
         assert!(!bones_visible(false, Some(&ready), false));
         assert!(bones_visible(true, Some(&ready), false));

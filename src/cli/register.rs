@@ -212,7 +212,8 @@ fn stepped(reg: &mut Registration, start: Instant) -> Result<crate::fakir::Fit> 
         let p = reg.step(Duration::from_millis(100));
         if !p.done {
             eprint!(
-                "\r{:<14} {:<10} iteration {} pass {} level {}  mean distance {:.5}  {:>8} units  {:5.1} s ",
+                "\r{:<5} {:<14} {:<10} iteration {} pass {} level {}  mean distance {:.5}  {:>8} units  {:5.1} s ",
+                p.attempt.name(),
                 p.activity.phase,
                 p.activity.chain.as_deref().unwrap_or(""),
                 p.activity.iteration,

@@ -58,7 +58,10 @@
 //! backwards; the synthetic rest-pose bust of seed 5 has its neck and head joints 14–24% of
 //! the full height from their truth); margins of 1.12 against 1.40 (squeeze), 3.1%
 //! against 5.5% (excess) and 2.54 against 3.84 (cost); a crouching complete figure whose
-//! limbs lie along its trunk might pass all three (none was measured). The second registration restarts the published progress.
+//! limbs lie along its trunk might pass all three (none was measured). The second
+//! registration is announced to the progress hook ([`super::solver::Pause::attempt`],
+//! [`super::Attempt::Bust`]): its share done starts again from 0, and the kiosk says it is
+//! looking for lost limbs.
 
 use std::sync::Arc;
 

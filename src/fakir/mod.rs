@@ -29,3 +29,4 @@ pub mod world;
 
 pub use init::Init;
 pub use registration::{BASE_LABEL, Fit, Progress, Registration, RegistrationOptions, register};
+pub use solver::Attempt;

@@ -22,7 +22,9 @@
 //! complete figure pays nothing. It is skipped when the curator named lost bones, from a given
 //! skeleton, with the lost-limb detection off, and after a bust fit was kept (the bust has
 //! lost every limb already). Only the first such limb (in the order of [`Template::bust`]) is
-//! tried. The second registration restarts the published progress.
+//! tried. The second registration is announced to the progress hook
+//! ([`super::solver::Pause::attempt`], [`super::Attempt::Pair`]): its share done starts
+//! again from 0, and the kiosk says it is looking for lost limbs.
 //!
 //! **Measured** (release CLI, `register` with default options, 2026-12-03): on the *Venus
 //! de Milo* the whole fit lost her left arm; the pair fit (both arms lost) explained the

@@ -386,7 +386,9 @@ use super::assign::{AssignParams, Assignment};
 use super::frame::WorkingFrame;
 use super::init::{Candidate, Init, candidates, rescaled};
 use super::schedule::{ScheduleSettings, register_skeleton};
-use super::solver::{Activity, Cancelled, NoPause, Pause, Solver, SolverSettings, template_extent};
+use super::solver::{
+    Activity, Attempt, Cancelled, NoPause, Pause, Solver, SolverSettings, template_extent,
+};
 use super::support::{
     BoneSupport, SPACING_CHUNK, SupportExam, add_spacings, better, collapse, complete_with,
     lost_from_names, spacing_samples,
@@ -529,12 +531,20 @@ impl Default for RegistrationOptions {
 /// Progress of a registration.
 #[derive(Clone, Debug, Default)]
 pub struct Progress {
-    /// What runs now; `activity.fraction` estimates the share done (0.15 for the candidates'
-    /// short registrations, up to 0.85 for the finalists and the scale restarts, the rest for
-    /// level 1 and the refit rounds, whose second half goes to the second facing check when it
-    /// may run (it jumps to the end when the check is not needed); each part advances with its
-    /// whole-skeleton iterations and chains), never decreasing.
+    /// What runs now; `activity.fraction` estimates the share of the current [`attempt`]
+    /// done (0.15 for the candidates' short registrations, up to 0.85 for the finalists and
+    /// the scale restarts, the rest for level 1 and the refit rounds, whose second half goes
+    /// to the second facing check when it may run (it jumps to the end when the check is not
+    /// needed); each part advances with its whole-skeleton iterations and chains), never
+    /// decreasing within an attempt.
+    ///
+    /// [`attempt`]: Progress::attempt
     pub activity: Activity,
+    /// Which registration of the figure runs: the whole figure's, or a second one with limbs
+    /// left out (a bust's or an armless figure's hypothesis, levels 7 and 8). The fraction
+    /// starts again from 0 when a second attempt begins; the skeleton shown is that
+    /// attempt's. When it is done, the fit kept is either attempt's.
+    pub attempt: Attempt,
     /// Work units done so far.
     pub units: u64,
     /// Mean distance (eq. 2.16) over the points of the current level.
@@ -761,6 +771,7 @@ fn register_in(
     if let Some(bust_opts) = super::bust::hypothesis(&template, opts)
         && super::bust::squeeze(&whole, &cloud.positions) > super::bust::SQUEEZE
     {
+        pause.attempt(Attempt::Bust);
         let bust = register_once(frame, cloud, template.clone(), &bust_opts, pause)?;
         let excess = super::bust::limb_excess(&whole, &bust, &cloud.positions, &template.bust)?;
         if excess < super::bust::EXPLAINED
@@ -770,6 +781,7 @@ fn register_in(
         }
     }
     if let Some((pair_opts, mirror)) = super::pair::hypothesis(&template, opts, &whole) {
+        pause.attempt(Attempt::Pair);
         let pair = register_once(frame, cloud, template, &pair_opts, pause)?;
         let excess = super::bust::limb_excess(
             &whole,
@@ -2492,6 +2504,13 @@ struct ChannelPause {
 }
 
 impl Pause for ChannelPause {
+    fn attempt(&mut self, attempt: Attempt) {
+        if let Ok(mut p) = self.progress.lock() {
+            p.attempt = attempt;
+            p.activity.fraction = 0.0;
+        }
+    }
+
     fn unit(&mut self, s: Option<&Solver>) -> Result<(), Cancelled> {
         self.units += 1;
         if Instant::now() >= self.deadline {

@@ -60,8 +60,38 @@ impl Activity {
     }
 }
 
+/// Which registration of the figure runs. [`super::register`] fits the whole figure first,
+/// and on some fits registers it a second time with limbs left out from the start: a bust
+/// (registration level 7, [`super::bust`]) or an armless figure (level 8, [`super::pair`]).
+/// Each attempt's [`Activity::fraction`] runs from 0 to 1 on its own.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Attempt {
+    /// The whole figure (the only attempt of most registrations).
+    #[default]
+    Whole,
+    /// Again without the four limbs (a bust's hypothesis).
+    Bust,
+    /// Again without a lost upper arm or thigh and its mirror (a Venus' hypothesis).
+    Pair,
+}
+
+impl Attempt {
+    /// A short name for progress lines: "whole", "bust", "pair".
+    pub fn name(self) -> &'static str {
+        match self {
+            Attempt::Whole => "whole",
+            Attempt::Bust => "bust",
+            Attempt::Pair => "pair",
+        }
+    }
+}
+
 /// Called after every work unit; returning `Err(Cancelled)` stops the registration.
 pub trait Pause {
+    /// Called before each registration of the figure but the first ([`Attempt`]): the
+    /// solvers' progress fraction starts again from 0. Hooks that publish progress say so.
+    fn attempt(&mut self, _attempt: Attempt) {}
+
     /// `solver`: the solver whose unit ended, or `None` for a unit of set-up work between
     /// solvers (placing the candidates, starting a level). Its skeleton and distances are in
     /// the registration's working units ([`super::frame`]), not necessarily the cloud's.

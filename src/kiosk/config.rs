@@ -77,6 +77,10 @@ pub struct Texts {
     pub title: String,
     pub hint: String,
     pub fitting: String,
+    /// Shown instead of `fitting` while FAKIR registers the figure a second time without
+    /// limbs it found lost (a bust's or an armless figure's hypothesis, [`crate::fakir::Attempt`]),
+    /// with that attempt's share done (`{percent}` as in `fitting`).
+    pub fitting_again: String,
     pub loading: String,
     pub still_there: String,
     pub touch_to_continue: String,
@@ -199,6 +203,7 @@ impl Default for KioskConfig {
                 title: "Pygmalion".into(),
                 hint: "Touch the statue to turn it · choose a pose below".into(),
                 fitting: "Revealing the anatomy…".into(),
+                fitting_again: "Looking for lost limbs…".into(),
                 loading: "Loading…".into(),
                 still_there: "Still there?".into(),
                 touch_to_continue: "Touch the screen to continue".into(),
@@ -654,6 +659,7 @@ impl KioskConfig {
                 title: s.string("title", &x.title),
                 hint: s.string("hint", &x.hint),
                 fitting: s.string("fitting", &x.fitting),
+                fitting_again: s.string("fitting_again", &x.fitting_again),
                 loading: s.string("loading", &x.loading),
                 still_there: s.string("still_there", &x.still_there),
                 touch_to_continue: s.string("touch_to_continue", &x.touch_to_continue),

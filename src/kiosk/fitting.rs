@@ -4,7 +4,10 @@
 //! stretch and settle onto the statue. The statue's [`StatueState::Fitting`] carries the work
 //! units done (for the operator) and FAKIR's estimate of the share done
 //! (`Progress.activity.fraction`, held never decreasing), which the status line shows as a
-//! percentage. When the fit is done the binding is built off the main thread and both are
+//! percentage. When FAKIR registers the figure a second time without limbs it found lost
+//! (`Progress.attempt`: a bust, an armless figure), the state says so and the share starts
+//! again from 0: the status line then reads `texts.fitting_again`, and visitors watch the
+//! skeleton settle in once more, without those limbs. When the fit is done the binding is built off the main thread and both are
 //! cached ([`super::statue::write_cache`]).
 
 use super::statue::{CacheKey, Pending, StatueTemplate, write_cache};
@@ -122,14 +125,18 @@ fn step_fitting(
                 }
             }
         }
-        // FAKIR's fraction never decreases; the kiosk holds to that whatever happens.
+        // FAKIR's fraction never decreases within an attempt; the kiosk holds to that whatever
+        // happens, and starts again from 0 only when a second attempt begins.
         let shown = match *state {
-            StatueState::Fitting { fraction, .. } => fraction,
+            StatueState::Fitting {
+                fraction, attempt, ..
+            } if attempt == progress.attempt => fraction,
             _ => 0.0,
         };
         *state = StatueState::Fitting {
             units: progress.units,
             fraction: progress.activity.fraction.clamp(0.0, 1.0).max(shown),
+            attempt: progress.attempt,
         };
         if !reg.is_done() {
             continue;

@@ -61,6 +61,7 @@ pub mod ui;
 
 use crate::anatomy::Skeleton;
 use crate::cloud::PointCloud;
+use crate::fakir::Attempt;
 use crate::math::{Vec2, Vec3};
 use crate::skinning::{Binding, Scratch};
 use bevy::prelude::*;
@@ -108,9 +109,15 @@ pub enum StatueState {
     /// The file is being read (and normals estimated) off the main thread.
     Loading,
     /// FAKIR is running, a budget per frame; `units` counts the work units done so far and
-    /// `fraction` estimates the share of the fit done (FAKIR's `Progress.activity.fraction`,
+    /// `attempt` says which registration of the figure runs (FAKIR's `Progress.attempt`: the
+    /// whole figure, or again without limbs found lost), and
+    /// `fraction` estimates the share of that attempt done (FAKIR's `Progress.activity.fraction`,
     /// in `[0, 1]`, never decreasing): visitors see it as a percentage and a bar.
-    Fitting { units: u64, fraction: f32 },
+    Fitting {
+        units: u64,
+        fraction: f32,
+        attempt: Attempt,
+    },
     /// The fit is done; the binding is being built off the main thread.
     Binding,
     /// Ready to pose.

@@ -23,7 +23,7 @@ use crate::cloud::PointCloud;
 use crate::cloud::normals::{NormalOptions, ensure_normals};
 use crate::cloud::ply::{ReadOptions, read_ply_with};
 use crate::error::{Error, Result};
-use crate::fakir::{Init, RegistrationOptions};
+use crate::fakir::{Attempt, Init, RegistrationOptions};
 use crate::skinning::{Binding, Scratch};
 use bevy::prelude::*;
 use std::path::{Path, PathBuf};
@@ -353,6 +353,7 @@ fn finish_loading(
                         *state = StatueState::Fitting {
                             units: 0,
                             fraction: 0.0,
+                            attempt: Attempt::Whole,
                         };
                     }
                 }

@@ -31,7 +31,8 @@
 //! done and work units, configuration problems and the statue's failure message).
 //!
 //! **Status line and progress.** While the statue loads the line says `texts.loading`; while
-//! FAKIR fits it, `texts.fitting` with the share done as a whole percentage
+//! FAKIR fits it, `texts.fitting` (`texts.fitting_again` while it fits the figure a second
+//! time without limbs found lost, [`attempt_text`]) with the share done as a whole percentage
 //! ([`fitting_percent`] of FAKIR's never-decreasing `Progress.activity.fraction`, rounded
 //! down so that 100 % means finished; `{percent}` in the text places it, else it is
 //! appended) over a thin bar filled to the same share; while the binding is built, 100 %.
@@ -79,6 +80,7 @@ use super::{
 };
 use crate::anatomy::{Pose, Template};
 use crate::cloud::PointCloud;
+use crate::fakir::Attempt;
 use crate::render::pictogram::{PictogramOptions, named_pose_pictogram};
 use crate::skinning::Method;
 use bevy::prelude::*;
@@ -275,10 +277,24 @@ pub fn progress_fraction(state: &StatueState) -> Option<f32> {
 /// `texts.fitting` with a percentage: in place of `{percent}` when the text has it (a
 /// translation can write "… {percent} %"), else appended as "… 42%".
 pub fn fitting_text(texts: &Texts, percent: u32) -> String {
-    if texts.fitting.contains("{percent}") {
-        texts.fitting.replace("{percent}", &percent.to_string())
+    with_percent(&texts.fitting, percent)
+}
+
+/// The text of a fitting attempt ([`Attempt`]: `texts.fitting` for the whole figure,
+/// `texts.fitting_again` for a second registration without limbs found lost) with its
+/// percentage, placed as in [`fitting_text`].
+pub fn attempt_text(texts: &Texts, attempt: Attempt, percent: u32) -> String {
+    match attempt {
+        Attempt::Whole => with_percent(&texts.fitting, percent),
+        Attempt::Bust | Attempt::Pair => with_percent(&texts.fitting_again, percent),
+    }
+}
+
+fn with_percent(text: &str, percent: u32) -> String {
+    if text.contains("{percent}") {
+        text.replace("{percent}", &percent.to_string())
     } else {
-        format!("{} {percent}%", texts.fitting)
+        format!("{text} {percent}%")
     }
 }
 
@@ -287,7 +303,9 @@ pub fn fitting_text(texts: &Texts, percent: u32) -> String {
 pub fn status_text(state: &StatueState, texts: &Texts) -> String {
     match state {
         StatueState::Loading => texts.loading.clone(),
-        StatueState::Fitting { fraction, .. } => fitting_text(texts, fitting_percent(*fraction)),
+        StatueState::Fitting {
+            fraction, attempt, ..
+        } => attempt_text(texts, *attempt, fitting_percent(*fraction)),
         StatueState::Binding => fitting_text(texts, 100),
         StatueState::Ready | StatueState::Failed { .. } => String::new(),
     }
@@ -925,9 +943,14 @@ fn update_texts(
     let ready = matches!(state, Some(StatueState::Ready));
     let progress = state.and_then(progress_fraction);
     let fitting = match state {
-        Some(StatueState::Fitting { units, fraction }) => {
+        Some(StatueState::Fitting {
+            units,
+            fraction,
+            attempt,
+        }) => {
             format!(
-                "\nfit {}% done, {units} work units",
+                "\nfit ({}) {}% done, {units} work units",
+                attempt.name(),
                 fitting_percent(*fraction)
             )
         }
