@@ -36,11 +36,26 @@
 //! seed 317 `--cut bone:r_upper_arm@0.3`) the mirror's excess was 3.1% and 2.0% — under
 //! [`EXPLAINED`], so the excess alone does not tell a lost pair — but the pair fits were 40.8
 //! and 12.5 times worse, and the whole fits are kept. On synthetic Venuses (both upper arms
-//! cut at 0.2, 6000 points) it does not help: seed 23's pair fit was 6.6 times worse (an
-//! armless trunk does not tell its heading, and the fit went wrong), and seed 22's whole fit
-//! had lost its left hand too, so no pair was tried; both keep their whole fits (a right arm
-//! lost, seed 22 a left hand as well). Seed 331 `--cut bone:l_thigh@0.6` loses nothing and
-//! pays nothing.
+//! cut at 0.2, 6000 points) it does not help: seed 23's pair fit was 6.6 times worse (not
+//! turned: its joints lie 0.6–2.5% of the height from their truth, but the arms' stumps, cut
+//! at 0.2 of the upper arms, are left to no bone), and seed 22's whole fit had lost its left
+//! hand too, so no pair was tried; both keep their whole fits (a right arm lost, seed 22 a
+//! left hand as well). Seed 331 `--cut bone:l_thigh@0.6` loses nothing and pays nothing.
+//! Held out (2026-12-03, 30k points before the cuts): of four more synthetic Venuses (seeds
+//! 24–27, both upper arms cut at 0.2, 0.1, 0.3 and 0.25) only seed 24 comes out right, and
+//! by its whole fit alone; seed 25 reports only a right forearm and hand, 26 only the left
+//! arm (the pair rejected), 27 nothing. Of two more single-arm cuts, seed 350
+//! (`l_upper_arm@0.1`) is right and seed 351 (`r_upper_arm@0.25`) loses nothing: the
+//! whole fit lays the bones of a lost arm over the figure, and the lost-limb rules of level
+//! 6 keep them.
+//!
+//! **Tried, not kept** (2026-12-03): losing both limbs only below their first bones (the
+//! forearms with their hands, the upper arms left free to take a stump) and keeping that fit
+//! under 4 times the whole fit's mean distance. With the stumps taken, the cost ratios
+//! (`register --missing l_forearm,r_forearm` against the whole fit) were 1.23 on the *Venus*
+//! and 2.89 on seed 23, against 10.3 and 6.9 on seeds 341 and 317; but seed 350, drawn
+//! afterwards, scored 3.05 (mirror excess 0.86%) and would have lost its healthy right
+//! forearm and hand. No bound between 2.89 and 3.05 is worth having.
 
 use super::Init;
 use super::registration::{Fit, RegistrationOptions};
