@@ -7,8 +7,8 @@
 //! percentage. When FAKIR registers the figure a second time without limbs it found lost
 //! (`Progress.attempt`: a bust, an armless figure), the state says so and the share starts
 //! again from 0: the status line then reads `texts.fitting_again`, and visitors watch the
-//! skeleton settle in once more, without those limbs. When the fit is done the binding is built off the main thread and both are
-//! cached ([`super::statue::write_cache`]).
+//! skeleton settle in once more, without those limbs. When the fit is done the binding is
+//! built off the main thread and both are cached ([`super::statue::write_cache`]).
 
 use super::statue::{CacheKey, Pending, StatueTemplate, write_cache};
 use super::{

@@ -285,7 +285,7 @@ pub fn fitting_text(texts: &Texts, percent: u32) -> String {
 /// percentage, placed as in [`fitting_text`].
 pub fn attempt_text(texts: &Texts, attempt: Attempt, percent: u32) -> String {
     match attempt {
-        Attempt::Whole => with_percent(&texts.fitting, percent),
+        Attempt::Whole => fitting_text(texts, percent),
         Attempt::Bust | Attempt::Pair => with_percent(&texts.fitting_again, percent),
     }
 }
