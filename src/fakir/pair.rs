@@ -30,8 +30,11 @@
 //! de Milo* the whole fit lost her left arm; the pair fit (both arms lost) explained the
 //! right arm's points within 1.08% of the diagonal at 1.14 times the whole fit's mean
 //! distance (0.920% of her size against 0.804%) and is kept: `FIT.json` lists both arms
-//! missing. Her figure is still turned by about 90° (the pair changes the lost set, not the
-//! heading: `--front z` is still needed for her pose). On synthetic statues cut through one
+//! missing. Her figure was still turned by about 90° then; since the breadth cue
+//! ([`super::init`], step 3), which the second registration uses because it knows the figure
+//! armless, the pair fit faces her across her chest (shoulders 33° and hips 49° from her
+//! front, against 51° and 90°; mean distance 0.932% of her size, and it is kept as before).
+//! `--front z` still fits her hips better (−5°). On synthetic statues cut through one
 //! arm (`synth --rigid --height 1.7`, 30k points; seed 341 `--cut bone:l_upper_arm@0.2`,
 //! seed 317 `--cut bone:r_upper_arm@0.3`) the mirror's excess was 3.1% and 2.0% — under
 //! [`EXPLAINED`], so the excess alone does not tell a lost pair — but the pair fits were 40.8

@@ -882,7 +882,7 @@ fn register_here(
                 scale,
             }]
         }
-        init => candidates(&template, &level0_points, init, opts.front),
+        init => candidates(&template, &level0_points, init, opts.front, &given_lost),
     };
     if any_given {
         for c in &mut cands {
@@ -2303,7 +2303,7 @@ impl FullRun<'_> {
     ) -> Result<(Vec<Candidate>, Vec<FullFit>)> {
         let mut cands: Vec<Candidate> = ups
             .iter()
-            .flat_map(|&up| candidates(template, points, &Init::Up(up), self.opts.front))
+            .flat_map(|&up| candidates(template, points, &Init::Up(up), self.opts.front, self.lost))
             .collect();
         for c in &mut cands {
             collapse(&mut c.skeleton, self.lost);
