@@ -168,7 +168,8 @@ enum Command {
         #[arg(long)]
         missing: Option<String>,
         /// The direction the figure faces: `x`, `y`, `z`, `-x`, … or `x,y,z`. Only headings
-        /// near it are tried (an armless torso does not tell its heading).
+        /// near it are tried (an armless torso tells only its left-right axis, by its
+        /// chest's breadth).
         #[arg(long, conflicts_with = "start")]
         front: Option<String>,
     },
