@@ -326,7 +326,10 @@
 //!    length of a present end beside a present mirror (fed and covered: `lost_limbs`). The
 //!    first lost bone of a limb whose support reaches 0.3 to 0.5 of its length from its
 //!    first joint is kept as a stump, the bones below it lost (`is_stump`: not a hand laid
-//!    over its parent, nor below a parent stretched past its mirror).
+//!    over its parent, nor below a parent stretched past its mirror). A limb taken lost
+//!    though the scan covers it from end to end is kept (covered through: a forearm resting
+//!    on a thigh), unless its axis lies deep in the other bones or one of its bones is folded
+//!    back onto its parent beyond [`FOLDED`] (a limb laid back onto its stump).
 //!    Lost bones get the expected size and pose of the thesis' ch. 5 (the healthy mirror
 //!    limb's, else the template's), take no points, and the rest of the skeleton is refined
 //!    without them (`final_iterations` whole-skeleton iterations, each limb fitted up to
@@ -1154,7 +1157,7 @@ fn register_here(
         let (tree, rho) = support_points(&mut s, &level0_points)?;
         let support = examine_support(&mut s, &tree, rho)?;
         support_tree = Some((tree, rho));
-        let lost = lost_limbs(&mut s, &support, &given_lost)?;
+        let lost = lost_limbs(&mut s, &support, &given_lost, Folds::Unfoldable)?;
         for (k, l) in skip.iter_mut().zip(&lost) {
             *k |= *l;
         }
@@ -1265,7 +1268,7 @@ fn register_here(
         // again on the fit as it now is, as level 6 will.
         s.refresh().map_err(cancelled)?;
         let support = examine_support(&mut s, &tree, rho)?;
-        let lost = lost_limbs(&mut s, &support, &given_lost)?;
+        let lost = lost_limbs(&mut s, &support, &given_lost, Folds::Lost)?;
         let coverage: Vec<f32> = support.iter().map(|x| x.coverage).collect();
         let shrunk: Vec<bool> = support.iter().map(|x| x.shrunk).collect();
         let dangling =
@@ -1310,7 +1313,7 @@ fn register_here(
         let missing = match lost {
             _ if !opts.missing => given_lost.clone(),
             Some(lost) => lost,
-            None => lost_limbs(&mut s, &support, &given_lost)?,
+            None => lost_limbs(&mut s, &support, &given_lost, Folds::Lost)?,
         };
         if missing.iter().any(|&m| m) {
             iterations += settle_lost_limbs(&mut s, &missing, opts)?;
@@ -1706,7 +1709,18 @@ fn examine_support(
 /// had laid along the trunk (0.75 radii deep: kept alone, the forearm completed below it lay
 /// on the trunk). The removal excess does not tell them apart (0.06 and 0.16 of the radius
 /// for the resting forearms, 0.044 and 0.010 for the buried ones). The reach keeps a limb
-/// folded back onto its stump lost (seed 300's forearm: reach 0.1). Support alone is not
+/// folded back onto its stump lost (seed 300's forearm: reach 0.1). **Folded back** (our
+/// choice, 2026-12-04): on the verdicts of level 6 and of the checks after the folded-limbs
+/// check ([`Folds::Lost`]), a bone turned back from its parent's direction by more than
+/// [`FOLDED`] ([`WorldSkeleton::fold_angle`]) is not covered through, nor is a limb with such
+/// a bone below: the human's joint ranges allow 125°, and a fold that the folded-limbs check
+/// did not undo (the unfolded start, reaching into empty space, scored higher) is a limb laid
+/// back onto its stump, not one lying against another part. The synthetic Venus seed 27
+/// (both upper arms cut at 0.25) had both forearms laid back along the stumps at 170° and
+/// 171°, covered through with their axes 1.06 and 1.31 radii deep, and nothing was found
+/// lost; now both forearms and hands are, the upper arms partial. The folded-limbs check asks
+/// with [`Folds::Unfoldable`]: a complete arm folded by the fit must stay a candidate for
+/// unfolding. Support alone is not
 /// enough: on real scans a fitted bone thicker than a draped limb, a foot on a plinth set
 /// aside, or a hand that FAKIR shrank, has little coverage but points of its own that
 /// nothing else explains (measured on `../shared/data`: the feet of Theodoric, Zenobia and
@@ -1779,7 +1793,12 @@ fn examine_support(
 /// (309's hand, cut at half its length, with them). A trial with the reach 0.3 to 0.9 and no
 /// guard (2026-11-29) lost seed 10's mended fit. One work unit per bone, and one per bone
 /// examined again.
-fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result<Vec<bool>> {
+fn lost_limbs(
+    s: &mut Solver,
+    support: &[BoneSupport],
+    known: &[bool],
+    folds: Folds,
+) -> Result<Vec<bool>> {
     let t = s.world.template.clone();
     let trunk = super::solver::trunk_bones(&t);
     let nb = t.bones.len();
@@ -1837,10 +1856,19 @@ fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result
         // thigh and its hand on the knee: their surface is there, most of their points shared
         // with that part). The whole limb below it is then kept. A lost limb that FAKIR laid
         // into the trunk is covered too, but some of its axes lie deep inside.
+        // A bone folded back onto its parent (at level 6, [`Folds::Lost`]) is not lying
+        // against another part.
+        let folded_back = |c: usize| {
+            folds == Folds::Lost
+                && s.world
+                    .fold_angle(c)
+                    .is_some_and(|a| a > FOLDED.to_radians())
+        };
         if lost[b]
             && !empty
             && !t.bones[b].children.is_empty()
             && covered_through(&support[b])
+            && !folded_back(b)
             && buried_depth(s, b, &lost) < THROUGH_DEPTH
         {
             // Examined from `b` down, each bone with those above it kept.
@@ -1851,6 +1879,7 @@ fn lost_limbs(s: &mut Solver, support: &[BoneSupport], known: &[bool]) -> Result
                 whole = whole
                     && !known[c]
                     && covered_through(&support[c])
+                    && !folded_back(c)
                     && buried_depth(s, c, &kept) < THROUGH_DEPTH;
                 kept[c] = false;
             }
@@ -2188,6 +2217,20 @@ pub const CROSSED_OVER_NEAR: f32 = 0.5;
 /// ranges bend a limb by at most 125° (the elbow's 120° and its 5° swing); the generator's
 /// statues, posed within them, reach 122° at most over 72 seeds.
 pub const FOLDED: f32 = 150.0;
+
+/// How [`lost_limbs`] treats a limb bone folded back onto its parent beyond [`FOLDED`]
+/// ([`WorldSkeleton::fold_angle`]) when the covered-through exception would keep it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Folds {
+    /// As any other bone: the folded-limbs check (level 5) asks which folds the rules take
+    /// before it tries to unfold the others, and a complete limb folded by the fit (an upper
+    /// arm stretched to the hand, the forearm laid back along it) is one it must still try.
+    Unfoldable,
+    /// Not covered through (level 6 and the checks after the folded-limbs check): a fold
+    /// that the check did not undo, or that it left to these rules, is a limb laid back
+    /// onto its stump, not one lying against another part.
+    Lost,
+}
 
 /// The support `reach` under which a limb bone hanging from the root block is uncovered at
 /// its root (the slid-block check, level 5 in the module docs): no axial tenth of it from

@@ -417,27 +417,41 @@ impl WorldSkeleton {
     pub fn most_folded(&self, skip: &[bool], limit: f32) -> Option<usize> {
         let t = &self.template;
         let mut best: Option<(usize, f32)> = None;
-        for (b, def) in t.bones.iter().enumerate() {
-            let Some(a) = def.parent else { continue };
-            let same_chain =
-                def.chain.is_some() && def.chain.map(|c| c.0) == t.bones[a].chain.map(|c| c.0);
-            if !same_chain
-                || def.kind != BoneKind::Free
-                || t.bones[a].kind != BoneKind::Free
-                || skip[a]
-                || skip[b]
-                || self.lengths[a] <= 0.0
-                || self.lengths[b] <= 0.0
-            {
+        for b in 0..t.bones.len() {
+            let Some(a) = t.bones[b].parent else { continue };
+            if skip[a] || skip[b] {
                 continue;
             }
-            let (u, v) = (self.frames[a] * Vec3::X, self.frames[b] * Vec3::X);
-            let angle = u.dot(v).clamp(-1.0, 1.0).acos();
-            if angle > limit && best.is_none_or(|(_, g)| angle > g) {
+            if let Some(angle) = self.fold_angle(b)
+                && angle > limit
+                && best.is_none_or(|(_, g)| angle > g)
+            {
                 best = Some((a, angle));
             }
         }
         best.map(|(a, _)| a)
+    }
+
+    /// How far bone `b` turns back from its parent's direction (radians, the angle between
+    /// the two directions: 0 straight on, π folded flat back), when both are free bones of
+    /// one chain with a length; `None` otherwise (a chain's first bone, a block or follower
+    /// bone, a collapsed bone). [`WorldSkeleton::most_folded`]'s measure.
+    pub fn fold_angle(&self, b: usize) -> Option<f32> {
+        let t = &self.template;
+        let def = &t.bones[b];
+        let a = def.parent?;
+        let same_chain =
+            def.chain.is_some() && def.chain.map(|c| c.0) == t.bones[a].chain.map(|c| c.0);
+        if !same_chain
+            || def.kind != BoneKind::Free
+            || t.bones[a].kind != BoneKind::Free
+            || self.lengths[a] <= 0.0
+            || self.lengths[b] <= 0.0
+        {
+            return None;
+        }
+        let (u, v) = (self.frames[a] * Vec3::X, self.frames[b] * Vec3::X);
+        Some(u.dot(v).clamp(-1.0, 1.0).acos())
     }
 
     /// The skeleton with the chain from bone `a` to its end **unfolded** (the start that
