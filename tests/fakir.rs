@@ -2444,6 +2444,85 @@ fn arms_folded_back_onto_their_stumps_are_found_lost() {
     })
 }
 
+#[test]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
+fn a_venus_whose_fit_kept_one_arm_over_the_trunk_loses_both_one_bone_down() {
+    // A synthetic Venus held out while the pair hypothesis was built: `synth --seed 25 --rigid
+    // --height 1.7 --cut bone:l_upper_arm@0.1 --cut bone:r_upper_arm@0.1` (30k points before
+    // the cuts), registered as `register` does. The whole fit lost the right forearm and hand
+    // but laid the left arm along the trunk's side, covered there; the pair one bone down
+    // (both forearms lost from the start, the upper arms free, started from the whole fit)
+    // explains that arm's points at 1.04 times the whole fit's mean distance, both upper arms
+    // lost (2026-12-04): every forearm and hand is lost, each upper arm lost or partial, and
+    // the joints the scan has lie within 2% of the height (0.75%; 1.03% when the pair was
+    // registered afresh).
+    on_one_thread(|| {
+        let s = cut_human(25, 30_000, &[("l_upper_arm", 0.1), ("r_upper_arm", 0.1)]);
+        let fit = register_as_the_cli(&s);
+        let t = &fit.skeleton.template;
+        let partial = fit.partial();
+        for name in ["l_forearm", "r_forearm", "l_hand", "r_hand"] {
+            assert!(fit.missing[t.bone_index(name).unwrap()], "{name} not lost");
+        }
+        for name in ["l_upper_arm", "r_upper_arm"] {
+            let b = t.bone_index(name).unwrap();
+            assert!(
+                fit.missing[b] || partial[b],
+                "{name} neither lost nor partial"
+            );
+        }
+        let below = [
+            "l_elbow",
+            "l_wrist",
+            "l_hand_tip",
+            "r_elbow",
+            "r_wrist",
+            "r_hand_tip",
+        ];
+        let err = joint_error_without(&fit.skeleton, &s.truth, &below, 1.7, false);
+        println!("joint error {:.2}%", 100.0 * err);
+        assert!(err < 0.02, "joint error {err}");
+    })
+}
+
+#[test]
+#[ignore = "long tier: one whole registration and its pair one bone down at 30k points"]
+fn a_venus_whose_pair_fit_keeps_her_trunk_one_bone_down() {
+    // `synth --seed 23 --rigid --height 1.7 --cut bone:l_upper_arm@0.2 --cut
+    // bone:r_upper_arm@0.2` (30k points before the cuts), registered as `register` does. The
+    // whole fit lost the right forearm and hand and kept the left arm over the trunk; the pair
+    // one bone down explains it. Registered afresh, that pair fit slid its neck and head 9.8%
+    // and 7.8% of the height from their truth (2.45% over the joints the scan has); started
+    // from the whole fit it keeps the whole fit's trunk: 1.12% on 2026-12-04 (the whole fit
+    // 1.17%). Every forearm and hand is lost; the neck and the head's base within 4% of the
+    // height, the joints the scan has within 2% on average.
+    on_one_thread(|| {
+        let s = cut_human(23, 30_000, &[("l_upper_arm", 0.2), ("r_upper_arm", 0.2)]);
+        let fit = register_as_the_cli(&s);
+        let t = &fit.skeleton.template;
+        for name in ["l_forearm", "r_forearm", "l_hand", "r_hand"] {
+            assert!(fit.missing[t.bone_index(name).unwrap()], "{name} not lost");
+        }
+        let (got, truth) = (fit.skeleton.pose(), s.truth.pose());
+        for name in ["neck", "head_base"] {
+            let j = t.joint_index(name).unwrap();
+            let off = got.joints[j].distance(truth.joints[j]) / 1.7;
+            assert!(off < 0.04, "{name} {:.1}% of the height off", 100.0 * off);
+        }
+        let below = [
+            "l_elbow",
+            "l_wrist",
+            "l_hand_tip",
+            "r_elbow",
+            "r_wrist",
+            "r_hand_tip",
+        ];
+        let err = joint_error_without(&fit.skeleton, &s.truth, &below, 1.7, false);
+        println!("joint error {:.2}%", 100.0 * err);
+        assert!(err < 0.02, "joint error {err}");
+    })
+}
+
 /// A held-out cut statue (`synth --seed SEED --rigid --height 1.7 --cut bone:B@F`, 30k
 /// points) registered as the CLI does: the lost set exactly `lost`, and the joints the scan
 /// has (`below`, the joints below the cut, left out) within 2% of the height.

@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use crate::common::on_one_thread;
 use pygmalion::anatomy::{Skeleton, Template};
-use pygmalion::fakir::bust::{EXPLAINED, SQUEEZE, limb_excess, squeeze};
+use pygmalion::fakir::bust::{EXPLAINED, SQUEEZE, limb_excess, removal_cost, squeeze};
 use pygmalion::fakir::solver::{Cancelled, Pause, Solver};
 use pygmalion::fakir::support::lost_from_names;
 use pygmalion::fakir::{Attempt, Fit, RegistrationOptions, register};
@@ -144,6 +144,51 @@ fn a_standing_figures_legs_are_not_explained_by_its_trunk() {
     );
     let e = limb_excess(&whole, &bust, &s.cloud.positions, &t.bust).unwrap();
     assert!(e > 2.0 * EXPLAINED, "limbs removed: {e}");
+}
+
+#[test]
+fn leaving_out_a_limb_costs_its_own_points_and_nothing_on_the_trunk() {
+    // The truth of a complete posed statue as its fit. Leaving nothing out costs nothing (1
+    // exactly); each point's nearest surface only gets farther as more bones are left out,
+    // so the cost grows with the subtree (forearm, arm, the bust's four limbs). Over the
+    // points sampled on the trunk (no limb's), the right arm's removal costs almost nothing:
+    // only points near the shoulder had its surface nearest (under 2% more). Over all the
+    // points it costs the arm's: its points lie on its surface (the sampled envelope), far
+    // from every other bone.
+    let s = human(12, false, Vec::new());
+    let t = s.truth.template.clone();
+    let nb = t.bones.len();
+    let whole = as_fit(&s.truth, s.cloud.len(), vec![false; nb]);
+    let pts = &s.cloud.positions;
+    let cost = |names: &[&str]| {
+        let names: Vec<String> = names.iter().map(|n| n.to_string()).collect();
+        removal_cost(&whole, pts, &names).unwrap()
+    };
+    assert_eq!(cost(&[]), 1.0);
+    let (forearm, arm) = (cost(&["r_forearm"]), cost(&["r_upper_arm"]));
+    let bust: Vec<&str> = t.bust.iter().map(String::as_str).collect();
+    let all = cost(&bust);
+    assert!(
+        1.0 < forearm && forearm <= arm && arm <= all,
+        "forearm {forearm}, arm {arm}, four limbs {all}"
+    );
+    assert!(arm > 10.0, "the right arm left out: {arm}");
+    let limbs = lost_from_names(&t, &t.bust).unwrap();
+    let trunk: Vec<Vec3> = pts
+        .iter()
+        .zip(&s.labels)
+        .filter(|(_, l)| limbs.get(**l as usize) == Some(&false))
+        .map(|(p, _)| *p)
+        .collect();
+    let trunk_fit = as_fit(&s.truth, trunk.len(), vec![false; nb]);
+    let on_trunk = removal_cost(&trunk_fit, &trunk, &["r_upper_arm".into()]).unwrap();
+    assert!(
+        (1.0..1.02).contains(&on_trunk),
+        "the right arm left out over the trunk's points: {on_trunk}"
+    );
+    // Not a limb: an error naming it.
+    let e = removal_cost(&whole, pts, &["spine_upper".into()]).unwrap_err();
+    assert!(e.to_string().contains("spine_upper"), "{e}");
 }
 
 #[test]

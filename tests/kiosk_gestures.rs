@@ -719,7 +719,7 @@ fn friendly_names_and_status_lines() {
     );
     // A second registration without limbs found lost (a bust, an armless figure) says so,
     // with its own share done.
-    for attempt in [Attempt::Bust, Attempt::Pair] {
+    for attempt in [Attempt::Bust, Attempt::Pair, Attempt::PairBelow] {
         let again = StatueState::Fitting {
             units: 9000,
             fraction: 0.25,

@@ -169,6 +169,26 @@ fn bones_of(fit: &Fit) -> (Vec<PreparedBone>, Vec<bool>) {
     (bones, present)
 }
 
+/// How many times the mean distance of the figure's points of `positions` (the cloud `fit`
+/// was registered on) to the nearest surface of `fit`'s present bones grows when the limbs
+/// named in `limbs` (each with the bones it carries) are left out too: what a second
+/// registration without them would cost against `fit` had none of its other bones moved.
+/// 1 without figure points or at a zero mean distance; infinite when no bone is left. Errors
+/// only on names that are not limb bones of the template ([`lost_from_names`]).
+pub fn removal_cost(fit: &Fit, positions: &[Vec3], limbs: &[String]) -> Result<f64> {
+    let out = lost_from_names(&fit.skeleton.template, limbs)?;
+    let (bones, present) = bones_of(fit);
+    let (mut with, mut without) = (0.0f64, 0.0f64);
+    for p in figure(fit, positions) {
+        with += nearest_surface(&bones, p, |k| present[k]).1 as f64;
+        without += nearest_surface(&bones, p, |k| present[k] && !out[k]).1 as f64;
+    }
+    if !(with > 0.0) {
+        return Ok(1.0);
+    }
+    Ok(without / with)
+}
+
 /// The largest, over the limbs named in `limbs` (for a bust its [`Template::bust`], each with
 /// the bones it carries), of the mean distance of the figure's points that lie nearest to
 /// that limb's surface in `whole` to the nearest surface of `bust`'s bones (its missing ones

@@ -358,7 +358,15 @@
 //!    again with both lost from the start; that fit is the result when it explains the
 //!    points the mirror had taken ([`super::bust::limb_excess`] under
 //!    [`super::pair::EXPLAINED`]) at a mean distance under [`super::pair::COST`] times the
-//!    whole fit's. The *Venus de Milo* then reports both arms missing.
+//!    whole fit's. The *Venus de Milo* then reports both arms missing. When that does not
+//!    apply or its fit is not kept, the same one bone down ([`super::pair::Level::Below`]): a
+//!    whole fit that lost a forearm or a shin with what it carries, its mirror whole, is
+//!    registered again with both lost from there, from the whole fit's skeleton, the upper
+//!    arms or thighs free to take a stump; that fit is the result on the same excess, a
+//!    mean distance under [`super::pair::COST_BELOW`] times the whole fit's, and the
+//!    mirror's upper arm (thigh) lost or shrunk in it. Either registration runs only when it is worth it
+//!    ([`super::pair::Hypothesis::worth_trying`]): without the mirror limb, the whole fit's
+//!    other bones must stay near enough to the points (a healthy mirror limb is not).
 //!
 //! ## Incremental by design
 //! The algorithm is written as plain sequential code whose elementary steps are **work
@@ -761,8 +769,11 @@ fn working_frame(cloud: &PointCloud) -> Option<WorkingFrame> {
 /// the bust hypothesis ([`super::bust`]): a whole fit squeezed into its points is registered
 /// again without the template's bust limbs, and that fit is kept when it explains the points
 /// the limbs had taken at a mean distance not far above the whole fit's; then (no bust fit
-/// kept) the pair hypothesis ([`super::pair`]): a fit that lost an upper arm or a thigh
-/// beside a whole mirror is registered again with both lost, kept on the same two tests.
+/// kept) the pair hypotheses ([`super::pair::hypotheses`]): a fit that lost an upper arm or a
+/// thigh beside a whole mirror is registered again with both lost, kept on the same two
+/// tests; else one that lost a forearm or a shin, one bone down, kept on
+/// [`super::pair::Hypothesis::keeps`]'s. Each only when
+/// [`super::pair::Hypothesis::worth_trying`].
 fn register_in(
     frame: Option<WorkingFrame>,
     cloud: &PointCloud,
@@ -783,18 +794,19 @@ fn register_in(
             return Ok(bust);
         }
     }
-    if let Some((pair_opts, mirror)) = super::pair::hypothesis(&template, opts, &whole) {
-        pause.attempt(Attempt::Pair);
-        let pair = register_once(frame, cloud, template, &pair_opts, pause)?;
-        let excess = super::bust::limb_excess(
-            &whole,
-            &pair,
-            &cloud.positions,
-            std::slice::from_ref(&mirror),
-        )?;
-        if excess < super::pair::EXPLAINED
-            && pair.mean_distance < super::pair::COST * whole.mean_distance
-        {
+    for hypothesis in super::pair::hypotheses(&template, opts, &whole) {
+        // Not worth a registration when the mirror limb explains points that no other bone
+        // of the whole fit comes near (a healthy arm or leg).
+        if !hypothesis.worth_trying(&whole, &cloud.positions)? {
+            continue;
+        }
+        // Each level its own attempt: the kiosk's bar starts again from 0 for the second.
+        pause.attempt(match hypothesis.level {
+            super::pair::Level::Limb => Attempt::Pair,
+            super::pair::Level::Below => Attempt::PairBelow,
+        });
+        let pair = register_once(frame, cloud, template.clone(), &hypothesis.opts, pause)?;
+        if hypothesis.keeps(&whole, &pair, &cloud.positions)? {
             return Ok(pair);
         }
     }

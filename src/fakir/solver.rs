@@ -73,15 +73,19 @@ pub enum Attempt {
     Bust,
     /// Again without a lost upper arm or thigh and its mirror (a Venus' hypothesis).
     Pair,
+    /// Again without a lost forearm or shin and its mirror, one bone down
+    /// ([`super::pair::Level::Below`]): a Venus whose whole fit kept one arm.
+    PairBelow,
 }
 
 impl Attempt {
-    /// A short name for progress lines: "whole", "bust", "pair".
+    /// A short name for progress lines: "whole", "bust", "pair", "pair below".
     pub fn name(self) -> &'static str {
         match self {
             Attempt::Whole => "whole",
             Attempt::Bust => "bust",
             Attempt::Pair => "pair",
+            Attempt::PairBelow => "pair below",
         }
     }
 }
