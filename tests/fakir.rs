@@ -1721,6 +1721,25 @@ fn check_lost_case(
     }
 }
 
+/// The joints of both arms from the elbows down: what a statue cut through both upper arms
+/// (a Venus) lacks.
+const BELOW_THE_ELBOWS: [&str; 6] = [
+    "l_elbow",
+    "l_wrist",
+    "l_hand_tip",
+    "r_elbow",
+    "r_wrist",
+    "r_hand_tip",
+];
+
+/// Asserts that `fit` found both forearms and both hands lost.
+fn assert_forearms_and_hands_lost(fit: &pygmalion::fakir::Fit) {
+    let t = &fit.skeleton.template;
+    for name in ["l_forearm", "r_forearm", "l_hand", "r_hand"] {
+        assert!(fit.missing[t.bone_index(name).unwrap()], "{name} not lost");
+    }
+}
+
 /// Mean distance of the joints of `fit` to the truth's (fraction of `height`), joints named
 /// in `leave_out` excepted; with `mirrored`, each truth joint is compared with the fit's
 /// joint of the other side (left and right exchanged).
@@ -1766,14 +1785,7 @@ fn known_lost_registration() {
     // tips): seed 22 2.32%, seed 23 3.27% (a guard at 4%: the 2% is for complete
     // statues, and the shoulders lose their stumps' points to the clavicles). Told only the lost arms, seed 22 came out with left
     // and right exchanged (22.7%): an armless trunk does not tell its heading.
-    let arms = [
-        "l_elbow",
-        "l_wrist",
-        "l_hand_tip",
-        "r_elbow",
-        "r_wrist",
-        "r_hand_tip",
-    ];
+    let arms = BELOW_THE_ELBOWS;
     for seed in [22, 23] {
         let s = cut_human(seed, 6_000, &[("l_upper_arm", 0.2), ("r_upper_arm", 0.2)]);
         let t = s.truth.template.clone();
@@ -2430,15 +2442,7 @@ fn arms_folded_back_onto_their_stumps_are_found_lost() {
         for arm in ["l_upper_arm", "r_upper_arm"] {
             assert!(partial[t.bone_index(arm).unwrap()], "{arm} not partial");
         }
-        let below = [
-            "l_elbow",
-            "l_wrist",
-            "l_hand_tip",
-            "r_elbow",
-            "r_wrist",
-            "r_hand_tip",
-        ];
-        let err = joint_error_without(&fit.skeleton, &s.truth, &below, 1.7, false);
+        let err = joint_error_without(&fit.skeleton, &s.truth, &BELOW_THE_ELBOWS, 1.7, false);
         println!("joint error {:.2}%", 100.0 * err);
         assert!(err < 0.02, "joint error {err}");
     })
@@ -2461,9 +2465,7 @@ fn a_venus_whose_fit_kept_one_arm_over_the_trunk_loses_both_one_bone_down() {
         let fit = register_as_the_cli(&s);
         let t = &fit.skeleton.template;
         let partial = fit.partial();
-        for name in ["l_forearm", "r_forearm", "l_hand", "r_hand"] {
-            assert!(fit.missing[t.bone_index(name).unwrap()], "{name} not lost");
-        }
+        assert_forearms_and_hands_lost(&fit);
         for name in ["l_upper_arm", "r_upper_arm"] {
             let b = t.bone_index(name).unwrap();
             assert!(
@@ -2471,22 +2473,14 @@ fn a_venus_whose_fit_kept_one_arm_over_the_trunk_loses_both_one_bone_down() {
                 "{name} neither lost nor partial"
             );
         }
-        let below = [
-            "l_elbow",
-            "l_wrist",
-            "l_hand_tip",
-            "r_elbow",
-            "r_wrist",
-            "r_hand_tip",
-        ];
-        let err = joint_error_without(&fit.skeleton, &s.truth, &below, 1.7, false);
+        let err = joint_error_without(&fit.skeleton, &s.truth, &BELOW_THE_ELBOWS, 1.7, false);
         println!("joint error {:.2}%", 100.0 * err);
         assert!(err < 0.02, "joint error {err}");
     })
 }
 
 #[test]
-#[ignore = "long tier: one whole registration and its pair one bone down at 30k points"]
+#[ignore = "long tier (bash tests/run.sh --include-ignored)"]
 fn a_venus_whose_pair_fit_keeps_her_trunk_one_bone_down() {
     // `synth --seed 23 --rigid --height 1.7 --cut bone:l_upper_arm@0.2 --cut
     // bone:r_upper_arm@0.2` (30k points before the cuts), registered as `register` does. The
@@ -2500,24 +2494,14 @@ fn a_venus_whose_pair_fit_keeps_her_trunk_one_bone_down() {
         let s = cut_human(23, 30_000, &[("l_upper_arm", 0.2), ("r_upper_arm", 0.2)]);
         let fit = register_as_the_cli(&s);
         let t = &fit.skeleton.template;
-        for name in ["l_forearm", "r_forearm", "l_hand", "r_hand"] {
-            assert!(fit.missing[t.bone_index(name).unwrap()], "{name} not lost");
-        }
+        assert_forearms_and_hands_lost(&fit);
         let (got, truth) = (fit.skeleton.pose(), s.truth.pose());
         for name in ["neck", "head_base"] {
             let j = t.joint_index(name).unwrap();
             let off = got.joints[j].distance(truth.joints[j]) / 1.7;
             assert!(off < 0.04, "{name} {:.1}% of the height off", 100.0 * off);
         }
-        let below = [
-            "l_elbow",
-            "l_wrist",
-            "l_hand_tip",
-            "r_elbow",
-            "r_wrist",
-            "r_hand_tip",
-        ];
-        let err = joint_error_without(&fit.skeleton, &s.truth, &below, 1.7, false);
+        let err = joint_error_without(&fit.skeleton, &s.truth, &BELOW_THE_ELBOWS, 1.7, false);
         println!("joint error {:.2}%", 100.0 * err);
         assert!(err < 0.02, "joint error {err}");
     })
