@@ -86,7 +86,9 @@
 //! search, none of the checks that question a placement), its forearms (shins) collapsed:
 //! the whole fit's placement and trunk were good, only what hangs from the shoulders (hips)
 //! is in question. Registered afresh instead (the first version), seed 23's pair fit slid
-//! its neck and head 9.8% and 7.8% of the height from their truth. The joint error over the
+//! its neck and head 9.8% and 7.8% of the height from their truth; from the whole fit,
+//! seed 23's `register` also takes 18.5 s instead of 28.2 s (release, wall, median of 2).
+//! The joint error over the
 //! joints the scan has (elbows, wrists and hand tips left out), whole fit → pair fit afresh
 //! → pair fit from the whole: Venus 23 1.17% → 2.45% → 1.12%, 25 1.17% → 1.03% → 0.75%, 26
 //! 0.37% → 0.88% → 0.66%, every forearm and hand lost in each; an upper arm cut at 0.2 or
@@ -113,7 +115,9 @@
 //! the factor 4. Of the 19 second registrations on the fifteen single-limb cuts above (300,
 //! 301, 302, 303, 310, 313, 314, 317, 319, 334, 341, 343, 345, 349, 350), 12 are no longer
 //! run (every whole-limb one, and one bone down on 300, 302, 313, 317, 319, 334, 341, 349);
-//! their lost sets and fits are unchanged, since none of those fits was kept. **On real
+//! their lost sets and fits are unchanged, since none of those fits was kept. Seed 302's
+//! `register` (release, whole-process wall time, median of 2 runs): 83.3 s → 43.9 s.
+//! **On real
 //! scans it rarely saves anything:** their fits lie farther from their points (drapery,
 //! fingers, the sphere-mesh's coarseness), which dilutes the estimate. Computed by a numpy
 //! script over `register`'s fits of `../shared/data` (base points left out), the arms of the
