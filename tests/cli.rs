@@ -127,7 +127,6 @@ fn fit_json_support_flags_agree_with_its_lists() {
     use pygmalion::anatomy::{Skeleton, Template};
     use pygmalion::cli::FitReport;
     use pygmalion::fakir::Fit;
-    use pygmalion::fakir::support::BoneSupport;
     use std::sync::Arc;
     let t = Arc::new(Template::builtin("human").unwrap());
     let nb = t.bones.len();
@@ -135,18 +134,7 @@ fn fit_json_support_flags_agree_with_its_lists() {
     // Coverage bands as the support measured them: the head uncovered (a trunk bone, never
     // lost), the left forearm and hand covered but lost (laid over another part), the right
     // shin partly covered.
-    let mut support: Vec<BoneSupport> = t
-        .bones
-        .iter()
-        .map(|b| BoneSupport {
-            bone: b.name.clone(),
-            coverage: 1.0,
-            reach: 1.0,
-            missing: false,
-            partial: false,
-            shrunk: false,
-        })
-        .collect();
+    let mut support = crate::common::full_support(&t);
     support[bone("head")].coverage = 0.3;
     support[bone("head")].missing = true;
     support[bone("r_shin")].coverage = 0.6;

@@ -62,3 +62,21 @@ pub fn on_one_thread(f: impl FnOnce() + Send) {
         .unwrap()
         .install(f)
 }
+
+/// The support of every bone of `t` as a whole, well-covered figure's: covered and reached
+/// through, nothing missing, partial or shrunk (tests then change the bones they study).
+pub fn full_support(
+    t: &pygmalion::anatomy::Template,
+) -> Vec<pygmalion::fakir::support::BoneSupport> {
+    t.bones
+        .iter()
+        .map(|b| pygmalion::fakir::support::BoneSupport {
+            bone: b.name.clone(),
+            coverage: 1.0,
+            reach: 1.0,
+            missing: false,
+            partial: false,
+            shrunk: false,
+        })
+        .collect()
+}

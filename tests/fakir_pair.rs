@@ -157,17 +157,9 @@ fn a_pair_fit_is_kept_on_its_level_s_cost_and_one_bone_down_on_a_stump() {
         panic!("two hypotheses expected");
     };
     let support = |shrunk: bool| -> Vec<BoneSupport> {
-        t.bones
-            .iter()
-            .map(|b| BoneSupport {
-                bone: b.name.clone(),
-                coverage: 1.0,
-                reach: 1.0,
-                missing: false,
-                partial: false,
-                shrunk,
-            })
-            .collect()
+        let mut all = crate::common::full_support(&t);
+        all.iter_mut().for_each(|b| b.shrunk = shrunk);
+        all
     };
     let pair_fit = |lost: &[&str], cost: f64, shrunk: bool| {
         let mut f = fit_missing(&t, lost);
