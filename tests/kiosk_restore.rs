@@ -612,3 +612,48 @@ fn swipes_switch_restorations_and_a_donor_that_cannot_lend_gets_a_gentle_message
     );
     assert!(k.max_frame < Duration::from_millis(500));
 }
+
+#[test]
+fn an_arm_broken_through_the_upper_arm_is_borrowed_from_the_stump() {
+    // The upper arm cut at 0.4 of its length: the part grows from the stump's end
+    // (`restore::stump`), so the ghost takes the upper arm too and the donor's upper arm
+    // comes from there (less the margin), not only the forearm and hand from the elbow.
+    let dir = crate::common::scratch("kiosk_restore_stump");
+    let target = synth(5, &["bone:l_upper_arm@0.4"]);
+    let donor = synth(9, &[]);
+    let c = setup(&dir, &[("broken", &target, true), ("donor", &donor, true)]);
+    let mut k = Kiosk::new(c);
+    k.wait_for_ghosts();
+    let template = k.restoration().completed.template.clone();
+    let idx = |n: &str| template.bone_index(n).unwrap();
+    let ua = idx("l_upper_arm");
+    let ghost_bones: Vec<usize> = k.ghosts().iter().map(|g| g.bone).collect();
+    assert_eq!(ghost_bones, [ua, idx("l_forearm"), idx("l_hand")]);
+    let part = k.restoration().parts[0].clone();
+    println!("the part starts at {:.3} of the upper arm", part.from);
+    assert!((part.from - 0.4).abs() < 0.05, "from {}", part.from);
+    let original = k.cloud();
+    k.tap_a_ghost();
+    k.wait_ready(0);
+    k.tap(k.entry_center(0));
+    k.until("landing", |w| w.resource::<PartSwap>().landed == 1);
+    let restored = k.cloud();
+    let prov = k.app.world().get::<Provenance>(k.statue()).unwrap().clone();
+    assert!(prov.source[..original.len()].iter().all(|&s| s == 0));
+    // The donor's upper-arm points lie past the stump's end less the margin, on the
+    // statue's upper arm.
+    let posed = k.restoration().completed.pose();
+    let (c1, c2) = (posed.bones[ua].c1, posed.bones[ua].c2);
+    let margin = pygmalion::restore::transfer::TransferOptions::default().margin;
+    let f: Vec<f32> = (original.len()..restored.len())
+        .filter(|&i| prov.bone[i] as usize == ua)
+        .map(|i| (restored.positions[i] - c1).dot(c2 - c1) / (c2 - c1).length_squared())
+        .collect();
+    let lo = f.iter().copied().fold(f32::INFINITY, f32::min);
+    println!(
+        "{} donor points on the upper arm, from {lo:.3} of it",
+        f.len()
+    );
+    assert!(f.len() > 100, "{} donor points on the upper arm", f.len());
+    assert!(lo > part.from - margin - 0.1, "a donor point at {lo}");
+}

@@ -32,5 +32,6 @@ mod kiosk_render;
 mod kiosk_restore;
 mod render;
 mod restore;
+mod restore_stump;
 mod skinning;
 mod synth;

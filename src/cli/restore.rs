@@ -196,8 +196,14 @@ pub fn run(a: &Args) -> Result<()> {
         })?;
     }
     for p in &r.report.parts {
+        // A part growing from a stump says where on its first bone it starts.
+        let from = if p.from > 0.0 {
+            format!(" (from {:.0}% of the {})", 100.0 * p.from, p.bones[0])
+        } else {
+            String::new()
+        };
         println!(
-            "{}: restored {} from {} ({} points, overlap {} points, 3δ = {:.4})",
+            "{}: restored {}{from} from {} ({} points, overlap {} points, 3δ = {:.4})",
             a.target.display(),
             p.bones.join(", "),
             p.donor,

@@ -82,6 +82,7 @@ use crate::fakir::solver::{Cancelled, Pause, Solver};
 use crate::fakir::support::{BoneSupport, complete_with, support};
 use crate::geometry::Bone;
 use crate::restore::merge::MergeOptions;
+use crate::restore::stump::start_at_stumps;
 use crate::restore::transfer::{Part, PoseSource, TransferOptions, Transferred, parts_of};
 use crate::restore::{Assembly, FROM_TARGET, check_donor, nearest_bones, transfer::transfer};
 use crate::skinning::{Binding, Scratch};
@@ -694,7 +695,7 @@ struct Analysis {
 /// operator.
 fn analyse_statue(cloud: &PointCloud, fit: &Skeleton, missing: Vec<bool>) -> Result<Analysis> {
     let sup = support(cloud, fit)?;
-    let parts = parts_of(&fit.template, &missing);
+    let mut parts = parts_of(&fit.template, &missing);
     let healthy: Vec<bool> = missing.iter().map(|m| !m).collect();
     let completed = complete_with(fit, &missing, Some(&healthy));
     let bone = if parts.is_empty() {
@@ -702,6 +703,8 @@ fn analyse_statue(cloud: &PointCloud, fit: &Skeleton, missing: Vec<bool>) -> Res
     } else {
         nearest_bones(&cloud.positions, &completed)
     };
+    // As `restore` does: a part hanging on a bone cut part-way grows from its stump.
+    start_at_stumps(&mut parts, &cloud.positions, &bone, &completed);
     Ok(Analysis {
         support: sup,
         parts,
@@ -806,14 +809,19 @@ fn part_picture(
     let posed = completed.pose();
     let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
     let mut spheres: Vec<(Vec3, f32)> = Vec::new();
-    for &k in &part.bones {
+    // The sphere of bone `k` at fraction `f` of its length.
+    let at = |k: usize, f: f32| {
         let b = posed.bones[k];
-        spheres.extend([(b.c1, b.r1), (b.c2, b.r2)]);
+        let f = f.clamp(0.0, 1.0);
+        (b.c1.lerp(b.c2, f), b.r1 + (b.r2 - b.r1) * f)
+    };
+    for (i, &k) in part.bones.iter().enumerate() {
+        // A part growing from a stump starts inside its first bone, its margin before that.
+        let start = if i == 0 { part.from - margin } else { 0.0 };
+        spheres.extend([at(k, start), at(k, 1.0)]);
     }
-    if let Some(a) = part.attach {
-        let b = posed.bones[a];
-        let f = (1.0 - margin).clamp(0.0, 1.0);
-        spheres.push((b.c1.lerp(b.c2, f), b.r1 + (b.r2 - b.r1) * f));
+    if let Some(a) = part.attach.filter(|_| part.from <= 0.0) {
+        spheres.push(at(a, 1.0 - margin));
     }
     for (c, r) in spheres {
         lo = lo.min(c - Vec3::splat(r));

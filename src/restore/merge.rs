@@ -12,8 +12,11 @@
 //! **The overlap** (the thesis assumes the parts "slightly overlap"): points of either
 //! statue within `r_J + margin · l_attach` of the joint centre `J` whose nearest bone is the
 //! attach bone or a bone of the part (the donor's margin points, the target's stump and
-//! shoulder around it). Points elsewhere are not touched.
+//! shoulder around it). Points elsewhere are not touched. For a part growing from a stump
+//! ([`Part::from`] > 0, [`super::stump`]) `J` is the point of the part's first bone's axis at
+//! the stump's end, `r_J` the bone's radius there, and `margin` is of that bone's length.
 
+use super::transfer::Part;
 use crate::anatomy::Skeleton;
 use crate::geometry::Bone;
 use crate::geometry::bone::PreparedBone;
@@ -61,22 +64,31 @@ fn base(p: Vec3, bones: &[PreparedBone]) -> (usize, Vec3, Vec3, f32) {
 }
 
 /// Merges in place: `positions` (and `normals`) hold both statues' points; the ones in the
-/// overlap around the joint at `c1` of bone `part_root` (bones `zone_bones`) are moved.
-/// Returns the indices of the overlap's points and the statistics.
+/// overlap where `part` starts (the joint at `c1` of its first bone, or its stump's end) are
+/// moved. Returns the indices of the overlap's points and the statistics.
 pub fn merge(
     skeleton: &Skeleton,
-    part_root: usize,
-    zone_bones: &[usize],
+    part: &Part,
     margin: f32,
     positions: &mut [Vec3],
     opts: &MergeOptions,
 ) -> (Vec<usize>, MergeStats) {
     let posed = skeleton.pose();
     let prepared: Vec<PreparedBone> = posed.bones.iter().map(Bone::prepare).collect();
-    let j = posed.bones[part_root].c1;
-    let attach = skeleton.template.bones[part_root].parent;
-    let l_attach = attach.map_or(0.0, |a| skeleton.bones[a].length);
-    let radius = posed.bones[part_root].r1 + margin * l_attach;
+    let Some(&part_root) = part.bones.first() else {
+        return (Vec::new(), MergeStats::default());
+    };
+    let zone_bones = &part.bones;
+    let root = &posed.bones[part_root];
+    let f = part.from.clamp(0.0, 1.0);
+    let j = root.c1.lerp(root.c2, f);
+    let attach = part.attach;
+    let l_margin = if f > 0.0 {
+        skeleton.bones[part_root].length
+    } else {
+        attach.map_or(0.0, |a| skeleton.bones[a].length)
+    };
+    let radius = root.r1 + (root.r2 - root.r1) * f + margin * l_margin;
     // The overlap's points with their base points.
     // Only points near the joint can be in the overlap: base points for those alone.
     let near: Vec<usize> = (0..positions.len())

@@ -11,12 +11,14 @@
 //! | stage | module |
 //! |---|---|
 //! | which bones are there: support, missing and partial bones, completion (measured by the registration) | [`crate::fakir::support`] |
+//! | a part growing from a bone cut part-way (the stump's end) | [`mod@stump`] |
 //! | a donor's part re-proportioned and re-posed onto the target | [`mod@transfer`] |
 //! | the overlap merged to a single layer (eq. 5.1) | [`mod@merge`] |
 //! | the whole restoration, with provenance | [`restore`] (this module) |
 //! | one part at a time (the kiosk's part swapping): donor check, assembly with provenance | [`check_donor`], [`Assembly`] |
 
 pub mod merge;
+pub mod stump;
 pub mod transfer;
 
 use crate::anatomy::Skeleton;
@@ -26,6 +28,7 @@ use crate::fakir::support::{BoneSupport, complete_with, support};
 use crate::math::Vec3;
 use merge::{MergeOptions, MergeStats, merge};
 use serde::Serialize;
+use stump::start_at_stumps;
 use transfer::{Part, PoseSource, TransferOptions, parts_of, transfer};
 
 /// Where a restored point comes from.
@@ -93,6 +96,9 @@ impl Default for RestoreOptions {
 pub struct PartReport {
     pub bones: Vec<String>,
     pub attach: Option<String>,
+    /// Where the part starts on its first bone ([`Part::from`]: 0 from the joint, else the
+    /// end of the statue's stump of that bone, a fraction of its length).
+    pub from: f32,
     pub donor: String,
     /// Source index in [`Restored::source`] (donor `i` is `i + 1`).
     pub source: u32,
@@ -154,7 +160,7 @@ pub fn restore(
         }
         m
     };
-    let parts: Vec<Part> = parts_of(t, &missing);
+    let mut parts: Vec<Part> = parts_of(t, &missing);
     let listed: Vec<String> = sup
         .iter()
         .filter(|s| s.missing || s.partial)
@@ -178,6 +184,8 @@ pub fn restore(
     let completed = complete_with(target_fit, &missing, Some(&healthy));
     // Start from the target's points.
     let mut assembly = Assembly::from_target(target, &completed);
+    // A part whose bone it hangs on was cut part-way grows from that bone's stump.
+    start_at_stumps(&mut parts, &target.positions, &assembly.bone, &completed);
     let mut reports = Vec::new();
     let topts = TransferOptions {
         pose: opts.pose,
@@ -214,6 +222,7 @@ pub fn restore(
                             .map(|&k| t.bones[k].name.clone())
                             .collect(),
                         attach: part.attach.map(|a| t.bones[a].name.clone()),
+                        from: part.from,
                         donor: d.name.clone(),
                         source,
                         points: tr.cloud.len(),
@@ -367,14 +376,7 @@ impl Assembly {
         }
         self.source.extend(std::iter::repeat_n(source, n));
         self.bone.extend_from_slice(&tr.bones);
-        let (_, stats) = merge(
-            skeleton,
-            part.bones[0],
-            &part.bones,
-            margin,
-            &mut self.positions,
-            opts,
-        );
+        let (_, stats) = merge(skeleton, part, margin, &mut self.positions, opts);
         stats
     }
 

@@ -35,6 +35,10 @@ pub struct Part {
     pub bones: Vec<usize>,
     /// The bone the part hangs on (its root's parent), if any.
     pub attach: Option<usize>,
+    /// Where the part starts on its first bone, as a fraction of that bone's length from its
+    /// first joint: 0 when the whole bone is missing ([`parts_of`]); a stump's end when the
+    /// statue keeps that bone up to there ([`super::stump::start_at_stumps`]).
+    pub from: f32,
 }
 
 /// Groups the missing bones (`missing[k]`) into parts: each missing bone whose parent is
@@ -59,6 +63,7 @@ pub fn parts_of(t: &Template, missing: &[bool]) -> Vec<Part> {
         parts.push(Part {
             bones,
             attach: def.parent,
+            from: 0.0,
         });
     }
     parts
@@ -69,7 +74,8 @@ pub fn parts_of(t: &Template, missing: &[bool]) -> Vec<Part> {
 pub struct TransferOptions {
     pub pose: PoseSource,
     /// Fraction of the attach bone's length, from the joint, whose donor points come along for
-    /// the overlap.
+    /// the overlap (for a part starting inside its first bone, [`Part::from`], the same
+    /// fraction of that bone before the start).
     pub margin: f32,
     pub method: Method,
 }
@@ -128,7 +134,9 @@ pub fn transfer(
     }
     let mut goal = target.clone();
     if opts.pose == PoseSource::Donor {
-        for &k in &part.bones {
+        // A part growing from a stump keeps the stump's direction: the statue tells it.
+        let skip = usize::from(part.from > 0.0);
+        for &k in &part.bones[skip..] {
             goal.bones[k].rotation = donor_fit.bones[k].rotation;
         }
         goal.enforce_constraints();
@@ -140,30 +148,55 @@ pub fn transfer(
     let mut margin = Vec::new();
     // The donor's base (plinth) is not a limb, whatever bone it is bound to.
     let mut on_base = binding.base().iter().peekable();
+    // Axial fraction of a donor point along donor bone `b`, from its first joint.
+    let fraction = |i: usize, b: usize| {
+        let bone = &donor_posed.bones[b];
+        let axis = bone.c2 - bone.c1;
+        let l2 = axis.length_squared().max(1e-24);
+        (donor_cloud.positions[i] - bone.c1).dot(axis) / l2
+    };
+    let first = part.bones[0];
     for (i, &b) in labels.iter().enumerate() {
         if on_base.next_if_eq(&&(i as u32)).is_some() {
             continue;
         }
         let b = b as usize;
-        if part.bones.contains(&b) {
+        if part.from > 0.0 && b == first {
+            // A part growing from a stump: the first bone beyond the stump's end, and the
+            // `margin` before it for the overlap.
+            let f = fraction(i, b);
+            if f >= part.from - opts.margin {
+                keep.push(i);
+                margin.push(f < part.from);
+            }
+        } else if part.bones.contains(&b) {
             keep.push(i);
             margin.push(false);
-        } else if Some(b) == part.attach {
+        } else if part.from <= 0.0 && Some(b) == part.attach {
             // Near the joint the part hangs from: the last `margin` of the attach bone.
-            let bone = &donor_posed.bones[b];
-            let axis = bone.c2 - bone.c1;
-            let l2 = axis.length_squared().max(1e-24);
-            let f = (donor_cloud.positions[i] - bone.c1).dot(axis) / l2;
-            if f >= 1.0 - opts.margin {
+            if fraction(i, b) >= 1.0 - opts.margin {
                 keep.push(i);
                 margin.push(true);
             }
         }
     }
-    let on_part = keep
-        .iter()
-        .filter(|&&i| part.bones.contains(&(labels[i] as usize)))
-        .count();
+    if part.from > 0.0 {
+        // Skinned onto the statue, a few of the first bone's points near the donor's joints
+        // land before the margin (on the joint sphere the stump's part carries): left out, as
+        // the stump has them.
+        let bone = goal.pose().bones[first];
+        let axis = bone.c2 - bone.c1;
+        let l2 = axis.length_squared().max(1e-24);
+        let lands_before =
+            |i: usize| (moved.positions[i] - bone.c1).dot(axis) / l2 < part.from - opts.margin;
+        (keep, margin) = keep
+            .iter()
+            .zip(&margin)
+            .filter(|&(&i, _)| labels[i] as usize != first || !lands_before(i))
+            .map(|(&i, &m)| (i, m))
+            .unzip();
+    }
+    let on_part = margin.iter().filter(|m| !**m).count();
     if on_part == 0 {
         let names: Vec<&str> = part
             .bones

@@ -1,0 +1,107 @@
+//! Parts that grow from a bone cut part-way (our addition; the thesis restores whole limbs
+//! from a joint).
+//!
+//! An arm broken through the upper arm keeps a stump: the registration keeps the upper arm
+//! (partial) and loses the forearm and hand ([`crate::fakir::support`]). A part made of the
+//! lost bones alone hangs from the elbow, and the donor's margin covers only the end of the
+//! upper arm (`TransferOptions::margin`, 0.3 of it): between the stump's end and the margin
+//! the restored statue had a hole. Measured on a synthetic statue (`synth --seed 5 --points
+//! 20000 --cut bone:l_upper_arm@F`, restored from seed 9 with both truths as fits), the share of
+//! the upper arm's visible surface within 3ρ of a point, per tenth of its length from the
+//! shoulder: cut at 0.2, 0.53 0.13 0.08 0.08 over its third to sixth tenths; at 0.5, 0.54 over
+//! its sixth.
+//!
+//! **What.** [`stump_end`] measures how far along a bone the statue's points reach: the
+//! [`QUANTILE`] of the axial fractions (from the bone's first joint) of the points whose
+//! nearest bone it is. [`start_at_stumps`] makes a part grow from its attach bone's stump when
+//! that reach ends before [`WHOLE`]: the attach bone becomes the part's first bone, with
+//! [`Part::from`] its stump's end; the donor gives that bone's points beyond it, its margin
+//! lies on the same bone before it, and the merge is centred on the cut
+//! ([`super::merge::merge`]).
+//!
+//! **Our choices.** Only a limb bone (not the root block nor a bone carrying other chains,
+//! [`crate::fakir::solver::trunk_bones`]) whose children all belong to the part; the stump's
+//! direction is the fit's (its points tell it), so the donor's pose never turns that bone;
+//! at least [`MIN_POINTS`] points, else nothing is measured. A bone lost whole keeps the
+//! thesis' part from the joint: the registration completed it along its mirror or rest
+//! direction, which a stump of it need not follow.
+
+use super::transfer::Part;
+use crate::anatomy::Skeleton;
+use crate::math::Vec3;
+
+/// Quantile of the axial fractions taken as a stump's end (a few stray points past the break
+/// do not move it).
+pub const QUANTILE: f32 = 0.98;
+
+/// A bone whose points reach this fraction of its length is whole.
+pub const WHOLE: f32 = 0.9;
+
+/// Fewest points for a stump's end to be measured.
+pub const MIN_POINTS: usize = 20;
+
+/// How far along bone `bone` of `skeleton` the points reach: the [`QUANTILE`] of the axial
+/// fractions `(p − c₁)·(c₂ − c₁) / ‖c₂ − c₁‖²` of the points `positions[i]` with
+/// `nearest[i] == bone` (their nearest bone, [`super::nearest_bones`]). `None` with fewer than
+/// [`MIN_POINTS`] such points or a degenerate bone. The fraction can pass 1 (the points round
+/// the end sphere) or be negative.
+pub fn stump_end(
+    positions: &[Vec3],
+    nearest: &[u32],
+    skeleton: &Skeleton,
+    bone: usize,
+) -> Option<f32> {
+    let posed = skeleton.pose();
+    let b = posed.bones.get(bone)?;
+    let axis = b.c2 - b.c1;
+    let l2 = axis.length_squared();
+    if !(l2 > 1e-20) {
+        return None;
+    }
+    let mut f: Vec<f32> = positions
+        .iter()
+        .zip(nearest)
+        .filter(|(_, n)| **n as usize == bone)
+        .map(|(p, _)| (*p - b.c1).dot(axis) / l2)
+        .filter(|x| x.is_finite())
+        .collect();
+    if f.len() < MIN_POINTS {
+        return None;
+    }
+    let k = ((f.len() - 1) as f32 * QUANTILE).round() as usize;
+    let (_, x, _) = f.select_nth_unstable_by(k, f32::total_cmp);
+    Some(*x)
+}
+
+/// Makes each part whose attach bone is a cut limb bone grow from that bone's stump (see the
+/// module docs): the attach bone is put first in `bones`, `attach` becomes its parent and
+/// `from` its [`stump_end`] (clamped to `[0, 1]`). Parts left as they are: a part already
+/// starting inside a bone, no attach bone, a trunk attach bone, an attach bone carrying a bone
+/// outside the part, or one whose points reach [`WHOLE`] of it (or are too few to tell).
+pub fn start_at_stumps(
+    parts: &mut [Part],
+    positions: &[Vec3],
+    nearest: &[u32],
+    skeleton: &Skeleton,
+) {
+    let t = &skeleton.template;
+    let trunk = crate::fakir::solver::trunk_bones(t);
+    for part in parts.iter_mut() {
+        let Some(a) = part.attach else { continue };
+        if part.from > 0.0 || trunk[a] || part.bones.contains(&a) {
+            continue;
+        }
+        if !t.bones[a].children.iter().all(|c| part.bones.contains(c)) {
+            continue;
+        }
+        let Some(end) = stump_end(positions, nearest, skeleton, a) else {
+            continue;
+        };
+        if end >= WHOLE {
+            continue;
+        }
+        part.bones.insert(0, a);
+        part.attach = t.bones[a].parent;
+        part.from = end.clamp(0.0, 1.0);
+    }
+}
