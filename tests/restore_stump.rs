@@ -8,7 +8,7 @@ use pygmalion::geometry::bone::PreparedBone;
 use pygmalion::math::Vec3;
 use pygmalion::restore::stump::{MIN_POINTS, WHOLE, start_at_stumps, stump_end};
 use pygmalion::restore::transfer::{PoseSource, TransferOptions, parts_of, transfer};
-use pygmalion::restore::{Donor, FROM_TARGET, RestoreOptions, nearest_bones, restore};
+use pygmalion::restore::{Donor, FROM_TARGET, RestoreOptions, restore};
 use pygmalion::rng::Rng;
 use pygmalion::skinning::Binding;
 use pygmalion::synth::{Cut, SynthOptions, SynthStatue, generate};
@@ -40,15 +40,16 @@ fn a_stumps_end_is_where_its_cut_was() {
         ("r_forearm", 0.6),
     ] {
         let s = statue(5, &[&format!("bone:{bone}@{at}")]);
-        let near = nearest_bones(&s.cloud.positions, &s.truth);
-        let b = s.truth.template.bone_index(bone).unwrap();
-        let end = stump_end(&s.cloud.positions, &near, &s.truth, b).unwrap();
+        let t = &s.truth.template;
+        let b = t.bone_index(bone).unwrap();
+        // The bones below the cut have no points: left out.
+        let below: Vec<usize> = t.subtree(b).into_iter().filter(|&k| k != b).collect();
+        let end = stump_end(&s.cloud.positions, &s.truth, b, &below).unwrap();
         println!("{bone}@{at}: end {end:.3}");
         assert!((end - at).abs() < 0.05, "{bone} cut at {at}: end {end}");
     }
     // On a whole statue every limb bone reaches WHOLE: no part would start inside one.
     let s = statue(5, &[]);
-    let near = nearest_bones(&s.cloud.positions, &s.truth);
     let t = &s.truth.template;
     for name in [
         "l_upper_arm",
@@ -60,18 +61,27 @@ fn a_stumps_end_is_where_its_cut_was() {
         "r_thigh",
         "r_shin",
     ] {
-        let end = stump_end(
-            &s.cloud.positions,
-            &near,
-            &s.truth,
-            t.bone_index(name).unwrap(),
-        );
+        let b = t.bone_index(name).unwrap();
+        let end = stump_end(&s.cloud.positions, &s.truth, b, &[]);
         assert!(end.unwrap() >= WHOLE, "{name}: {end:?}");
+        // So is it when what it carries is left out (a limb lost at the joint): the points
+        // round the joint's sphere are then its own.
+        let below: Vec<usize> = t.subtree(b).into_iter().filter(|&k| k != b).collect();
+        let end = stump_end(&s.cloud.positions, &s.truth, b, &below);
+        assert!(
+            end.unwrap() >= 1.0,
+            "{name}, its children left out: {end:?}"
+        );
     }
     // Too few points tell nothing.
-    let few: Vec<Vec3> = s.cloud.positions[..MIN_POINTS - 1].to_vec();
-    let nf = vec![t.bone_index("l_upper_arm").unwrap() as u32; few.len()];
-    assert_eq!(stump_end(&few, &nf, &s.truth, nf[0] as usize), None);
+    let ua = t.bone_index("l_upper_arm").unwrap();
+    let few: Vec<Vec3> = (0..s.cloud.len())
+        .filter(|&i| s.labels[i] as usize == ua)
+        .take(MIN_POINTS - 1)
+        .map(|i| s.cloud.positions[i])
+        .collect();
+    assert_eq!(few.len(), MIN_POINTS - 1);
+    assert_eq!(stump_end(&few, &s.truth, ua, &[]), None);
 }
 
 #[test]
@@ -85,8 +95,7 @@ fn only_a_part_hanging_on_a_cut_limb_bone_grows_from_it() {
     }
     let mut parts = parts_of(&t, &missing);
     assert!(parts.iter().all(|p| p.from == 0.0));
-    let near = nearest_bones(&cut.cloud.positions, &cut.truth);
-    start_at_stumps(&mut parts, &cut.cloud.positions, &near, &cut.truth);
+    start_at_stumps(&mut parts, &cut.cloud.positions, &cut.truth);
     // The forearm's part takes the cut upper arm from its stump's end, and hangs on the
     // clavicle; the foot's part hangs on a whole shin and is left as it was.
     let arm = parts
@@ -110,7 +119,7 @@ fn only_a_part_hanging_on_a_cut_limb_bone_grows_from_it() {
     // Applied twice, nothing more changes.
     let again = {
         let mut p = parts.clone();
-        start_at_stumps(&mut p, &cut.cloud.positions, &near, &cut.truth);
+        start_at_stumps(&mut p, &cut.cloud.positions, &cut.truth);
         p
     };
     assert_eq!(again, parts);
@@ -151,8 +160,7 @@ fn only_a_part_hanging_on_a_cut_limb_bone_grows_from_it() {
         m[idx(n)] = true;
     }
     let mut parts = parts_of(&t, &m);
-    let near = nearest_bones(&armless.cloud.positions, &armless.truth);
-    start_at_stumps(&mut parts, &armless.cloud.positions, &near, &armless.truth);
+    start_at_stumps(&mut parts, &armless.cloud.positions, &armless.truth);
     assert_eq!(parts[0].bones[0], idx("l_upper_arm"));
     assert_eq!(parts[0].from, 0.0);
 }

@@ -704,7 +704,7 @@ fn analyse_statue(cloud: &PointCloud, fit: &Skeleton, missing: Vec<bool>) -> Res
         nearest_bones(&cloud.positions, &completed)
     };
     // As `restore` does: a part hanging on a bone cut part-way grows from its stump.
-    start_at_stumps(&mut parts, &cloud.positions, &bone, &completed);
+    start_at_stumps(&mut parts, &cloud.positions, &completed);
     Ok(Analysis {
         support: sup,
         parts,

@@ -185,7 +185,7 @@ pub fn restore(
     // Start from the target's points.
     let mut assembly = Assembly::from_target(target, &completed);
     // A part whose bone it hangs on was cut part-way grows from that bone's stump.
-    start_at_stumps(&mut parts, &target.positions, &assembly.bone, &completed);
+    start_at_stumps(&mut parts, &target.positions, &completed);
     let mut reports = Vec::new();
     let topts = TransferOptions {
         pose: opts.pose,

@@ -13,7 +13,7 @@
 //!
 //! **What.** [`stump_end`] measures how far along a bone the statue's points reach: the
 //! [`QUANTILE`] of the axial fractions (from the bone's first joint) of the points whose
-//! nearest bone it is. [`start_at_stumps`] makes a part grow from its attach bone's stump when
+//! nearest bone it is, the lost part's bones left out. [`start_at_stumps`] makes a part grow from its attach bone's stump when
 //! that reach ends before [`WHOLE`]: the attach bone becomes the part's first bone, with
 //! [`Part::from`] its stump's end; the donor gives that bone's points beyond it, its margin
 //! lies on the same bone before it, and the merge is centred on the cut
@@ -28,7 +28,10 @@
 
 use super::transfer::Part;
 use crate::anatomy::Skeleton;
+use crate::geometry::Bone;
+use crate::geometry::bone::{PreparedBone, nearest_bone_where};
 use crate::math::Vec3;
+use rayon::prelude::*;
 
 /// Quantile of the axial fractions taken as a stump's end (a few stray points past the break
 /// do not move it).
@@ -41,28 +44,30 @@ pub const WHOLE: f32 = 0.9;
 pub const MIN_POINTS: usize = 20;
 
 /// How far along bone `bone` of `skeleton` the points reach: the [`QUANTILE`] of the axial
-/// fractions `(p − c₁)·(c₂ − c₁) / ‖c₂ − c₁‖²` of the points `positions[i]` with
-/// `nearest[i] == bone` (their nearest bone, [`super::nearest_bones`]). `None` with fewer than
-/// [`MIN_POINTS`] such points or a degenerate bone. The fraction can pass 1 (the points round
-/// the end sphere) or be negative.
+/// fractions `(p − c₁)·(c₂ − c₁) / ‖c₂ − c₁‖²` of the points `positions` whose nearest bone
+/// (by signed distance, [`crate::geometry::bone::nearest_bone_where`]) is `bone` once the
+/// bones `absent` are left out — the lost part's bones, which have no points: completed at the
+/// joint, they would take the points round its sphere from a whole bone. `None` with fewer
+/// than [`MIN_POINTS`] such points or a degenerate bone. The fraction can pass 1 (the points
+/// round the end sphere) or be negative.
 pub fn stump_end(
     positions: &[Vec3],
-    nearest: &[u32],
     skeleton: &Skeleton,
     bone: usize,
+    absent: &[usize],
 ) -> Option<f32> {
     let posed = skeleton.pose();
-    let b = posed.bones.get(bone)?;
+    let b = *posed.bones.get(bone)?;
     let axis = b.c2 - b.c1;
     let l2 = axis.length_squared();
     if !(l2 > 1e-20) {
         return None;
     }
+    let prepared: Vec<PreparedBone> = posed.bones.iter().map(Bone::prepare).collect();
     let mut f: Vec<f32> = positions
-        .iter()
-        .zip(nearest)
-        .filter(|(_, n)| **n as usize == bone)
-        .map(|(p, _)| (*p - b.c1).dot(axis) / l2)
+        .par_iter()
+        .filter(|p| nearest_bone_where(&prepared, **p, |k| !absent.contains(&k)).0 == bone)
+        .map(|p| (*p - b.c1).dot(axis) / l2)
         .filter(|x| x.is_finite())
         .collect();
     if f.len() < MIN_POINTS {
@@ -75,15 +80,11 @@ pub fn stump_end(
 
 /// Makes each part whose attach bone is a cut limb bone grow from that bone's stump (see the
 /// module docs): the attach bone is put first in `bones`, `attach` becomes its parent and
-/// `from` its [`stump_end`] (clamped to `[0, 1]`). Parts left as they are: a part already
-/// starting inside a bone, no attach bone, a trunk attach bone, an attach bone carrying a bone
-/// outside the part, or one whose points reach [`WHOLE`] of it (or are too few to tell).
-pub fn start_at_stumps(
-    parts: &mut [Part],
-    positions: &[Vec3],
-    nearest: &[u32],
-    skeleton: &Skeleton,
-) {
+/// `from` its [`stump_end`] (the part's bones left out; clamped to `[0, 1]`). Parts left as
+/// they are: a part already starting inside a bone, no attach bone, a trunk attach bone, an
+/// attach bone carrying a bone outside the part, or one whose points reach [`WHOLE`] of it (or
+/// are too few to tell).
+pub fn start_at_stumps(parts: &mut [Part], positions: &[Vec3], skeleton: &Skeleton) {
     let t = &skeleton.template;
     let trunk = crate::fakir::solver::trunk_bones(t);
     for part in parts.iter_mut() {
@@ -94,7 +95,7 @@ pub fn start_at_stumps(
         if !t.bones[a].children.iter().all(|c| part.bones.contains(c)) {
             continue;
         }
-        let Some(end) = stump_end(positions, nearest, skeleton, a) else {
+        let Some(end) = stump_end(positions, skeleton, a, &part.bones) else {
             continue;
         };
         if end >= WHOLE {
