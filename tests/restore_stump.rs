@@ -256,3 +256,87 @@ fn an_arm_cut_through_the_upper_arm_is_restored_without_a_hole() {
     assert!(d.len() > 300);
     assert!(p95 < 0.002 && max < 0.005, "seam p95 {p95} max {max}");
 }
+
+#[test]
+fn a_bone_shrunk_onto_its_stump_gets_its_length_back_for_a_restoration() {
+    use pygmalion::fakir::support::{complete_cut, complete_with};
+    // The upper arm cut at 0.4, and fitted as FAKIR often leaves such a bone: shrunk onto its
+    // stump (0.45 of its length; held-out cuts were fitted at 0.43–0.88).
+    let target = statue(5, &["bone:l_upper_arm@0.4"]);
+    let t = target.truth.template.clone();
+    let idx = |n: &str| t.bone_index(n).unwrap();
+    let (ua, mirror) = (idx("l_upper_arm"), idx("r_upper_arm"));
+    let mut fit = target.truth.clone();
+    fit.bones[ua].length *= 0.45;
+    let mut missing = vec![false; t.bones.len()];
+    for n in ["l_forearm", "l_hand"] {
+        missing[idx(n)] = true;
+    }
+    let healthy: Vec<bool> = missing.iter().map(|m| !m).collect();
+    let plain = complete_with(&fit, &missing, Some(&healthy));
+    let cut = complete_cut(&fit, &missing, Some(&healthy));
+    // The registration's completion keeps it as fitted; the restoration's gives it its
+    // mirror's length, along its fitted direction, radii kept.
+    assert_eq!(plain.bones[ua], fit.bones[ua]);
+    assert_eq!(cut.bones[ua].length, fit.bones[mirror].length);
+    assert_eq!(cut.bones[ua].rotation, fit.bones[ua].rotation);
+    assert_eq!(
+        (cut.bones[ua].r1, cut.bones[ua].r2),
+        (fit.bones[ua].r1, fit.bones[ua].r2)
+    );
+    // Nothing else changes but the lost bones' places, carried by it.
+    for (k, lost) in missing.iter().enumerate() {
+        if k != ua && !lost {
+            assert_eq!(cut.bones[k], plain.bones[k], "{}", t.bones[k].name);
+        }
+    }
+    // The elbow comes back near its truth (the left and right upper arms of a synthetic
+    // statue differ by up to ±30% each).
+    let truth_elbow = target.truth.pose().bones[ua].c2;
+    let err = |s: &pygmalion::anatomy::Skeleton| s.pose().bones[ua].c2.distance(truth_elbow);
+    println!(
+        "elbow off its truth: {:.4} as fitted, {:.4} given back",
+        err(&plain),
+        err(&cut)
+    );
+    assert!(err(&cut) < 0.5 * err(&plain));
+    // A bone not shrunk (the truth), or a whole limb lost with it, keeps its length.
+    let whole = complete_cut(&target.truth, &missing, Some(&healthy));
+    assert_eq!(whole.bones[ua].length, target.truth.bones[ua].length);
+    let mut arm_lost = missing.clone();
+    arm_lost[ua] = true;
+    let healthy2: Vec<bool> = arm_lost.iter().map(|m| !m).collect();
+    assert_eq!(
+        complete_cut(&fit, &arm_lost, Some(&healthy2)).bones,
+        complete_with(&fit, &arm_lost, Some(&healthy2)).bones
+    );
+    // Restored with that fit, the part grows from the stump's end on the lengthened bone.
+    let donor = statue(9, &[]);
+    let r = restore(
+        &target.cloud,
+        &fit,
+        &[Donor {
+            name: "donor".into(),
+            cloud: &donor.cloud,
+            fit: &donor.truth,
+            missing: None,
+        }],
+        &RestoreOptions {
+            target_missing: Some(missing.clone()),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let part = &r.report.parts[0];
+    let want = 0.4 * target.truth.bones[ua].length / fit.bones[mirror].length;
+    println!(
+        "the part starts at {:.3} of the upper arm (the stump's end at {want:.3})",
+        part.from
+    );
+    assert_eq!(part.bones[0], "l_upper_arm");
+    assert!(
+        (part.from - want).abs() < 0.05,
+        "from {} for {want}",
+        part.from
+    );
+}

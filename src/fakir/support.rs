@@ -123,16 +123,11 @@ pub fn add_spacings(
     }
 }
 
-/// Expected length and radii of every bone (see the module docs), and whether the fitted
-/// bone had collapsed.
-fn expected_sizes(
-    fitted: &Skeleton,
-    healthy: Option<&[bool]>,
-) -> (Vec<(f32, f32, f32)>, Vec<bool>) {
-    let t = &fitted.template;
-    let rest = Skeleton::rest(t.clone());
-    // The statue's scale from the bones known to be there (all of them when none is known
-    // lost: a collapsed or lost bone says nothing of the statue's proportions).
+/// The statue's scale relative to its template: the median ratio of fitted to template lengths
+/// over the bones known to be there (all of them when none is known lost: a collapsed or lost
+/// bone says nothing of the statue's proportions); the root block's scale without any.
+fn statue_scale(fitted: &Skeleton, healthy: Option<&[bool]>) -> f32 {
+    let rest = Skeleton::rest(fitted.template.clone());
     let mut ratios: Vec<f32> = fitted
         .bones
         .iter()
@@ -145,7 +140,18 @@ fn expected_sizes(
         ratios.push(fitted.block_scale);
     }
     ratios.sort_by(f32::total_cmp);
-    let scale = ratios[ratios.len() / 2];
+    ratios[ratios.len() / 2]
+}
+
+/// Expected length and radii of every bone (see the module docs), and whether the fitted
+/// bone had collapsed.
+fn expected_sizes(
+    fitted: &Skeleton,
+    healthy: Option<&[bool]>,
+) -> (Vec<(f32, f32, f32)>, Vec<bool>) {
+    let t = &fitted.template;
+    let rest = Skeleton::rest(t.clone());
+    let scale = statue_scale(fitted, healthy);
     let templ: Vec<(f32, f32, f32)> = rest
         .bones
         .iter()
@@ -219,6 +225,44 @@ pub fn complete_with(fitted: &Skeleton, redo: &[bool], healthy: Option<&[bool]>)
     }
     s.enforce_constraints();
     s
+}
+
+/// [`complete_with`] for a restoration, with each bone cut part-way given back its length (our
+/// choice; `crate::restore` and the kiosk's part swapping use it, the registration's fit keeps
+/// the bone as fitted, its support telling where the break is): a limb bone kept (not in
+/// `redo`, not a trunk bone) whose children are all redone, fitted shorter than [`SHRUNK`] ×
+/// the template's proportions at the statue's scale — FAKIR shrank it onto its stump — gets
+/// its mirror's fitted length when that mirror is kept and not itself shrunk, else the
+/// template's at the statue's scale, along its fitted direction (radii kept). The lost bones
+/// then hang where the limb's joint was, not at the stump's end, and the restored part grows
+/// from the stump ([`crate::restore::stump`]). Measured on 40 held-out synthetic statues cut
+/// part-way through a bone (`synth --rigid --height 1.7 --cut bone:B@F`, registered by
+/// `register`): the cut bone, kept with its children lost, was fitted at 0.43–0.88 of its
+/// true length on 11 of them and flagged shrunk, at 0.59–0.79 unflagged on 6 more; one whole
+/// bone with a lost child was flagged (seed 338, whose fit lost the wrong limb).
+pub fn complete_cut(fitted: &Skeleton, redo: &[bool], healthy: Option<&[bool]>) -> Skeleton {
+    let t = &fitted.template;
+    let (_, shrunk) = expected_sizes(fitted, healthy);
+    let rest = Skeleton::rest(t.clone());
+    let scale = statue_scale(fitted, healthy);
+    let trunk = super::solver::trunk_bones(t);
+    let mir = t.mirror_bones();
+    let kept = |k: usize| !redo.get(k).copied().unwrap_or(false);
+    let mut s = fitted.clone();
+    for (k, def) in t.bones.iter().enumerate() {
+        if !kept(k) || trunk[k] || !shrunk[k] || def.children.is_empty() {
+            continue;
+        }
+        if def.children.iter().any(|&c| kept(c)) {
+            continue;
+        }
+        let expected = match mir[k] {
+            Some(m) if kept(m) && !shrunk[m] => fitted.bones[m].length,
+            _ => rest.bones[k].length * scale,
+        };
+        s.bones[k].length = s.bones[k].length.max(expected);
+    }
+    complete_with(&s, redo, healthy)
 }
 
 /// The bones named in `names` and every bone they carry (a limb the statue is known to have

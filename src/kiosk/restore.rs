@@ -79,7 +79,7 @@ use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
 use crate::fakir::register;
 use crate::fakir::solver::{Cancelled, Pause, Solver};
-use crate::fakir::support::{BoneSupport, complete_with, support};
+use crate::fakir::support::{BoneSupport, complete_cut, support};
 use crate::geometry::Bone;
 use crate::restore::merge::MergeOptions;
 use crate::restore::stump::start_at_stumps;
@@ -697,7 +697,7 @@ fn analyse_statue(cloud: &PointCloud, fit: &Skeleton, missing: Vec<bool>) -> Res
     let sup = support(cloud, fit)?;
     let mut parts = parts_of(&fit.template, &missing);
     let healthy: Vec<bool> = missing.iter().map(|m| !m).collect();
-    let completed = complete_with(fit, &missing, Some(&healthy));
+    let completed = complete_cut(fit, &missing, Some(&healthy));
     let bone = if parts.is_empty() {
         vec![0; cloud.len()]
     } else {

@@ -24,7 +24,7 @@ pub mod transfer;
 use crate::anatomy::Skeleton;
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
-use crate::fakir::support::{BoneSupport, complete_with, support};
+use crate::fakir::support::{BoneSupport, complete_cut, support};
 use crate::math::Vec3;
 use merge::{MergeOptions, MergeStats, merge};
 use serde::Serialize;
@@ -179,9 +179,10 @@ pub fn restore(
         ));
     }
     // Missing bones get their expected size and pose, as the registration completes the lost
-    // limbs it finds (the same again for those).
+    // limbs it finds (the same again for those); a bone cut part-way that FAKIR shrank onto
+    // its stump gets its length back (`complete_cut`).
     let healthy: Vec<bool> = missing.iter().map(|m| !m).collect();
-    let completed = complete_with(target_fit, &missing, Some(&healthy));
+    let completed = complete_cut(target_fit, &missing, Some(&healthy));
     // Start from the target's points.
     let mut assembly = Assembly::from_target(target, &completed);
     // A part whose bone it hangs on was cut part-way grows from that bone's stump.
