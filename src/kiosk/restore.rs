@@ -33,7 +33,9 @@
 //! placed from [`CurrentPose`] with the completed skeleton's size; its rotation relative to its
 //! parent is the completed one (the mirror limb, [`crate::fakir::support`]) unless the
 //! current pose turned that bone (a preset pose names it), then the pose's. The render plugin
-//! draws them hatched and pale blue ([`super::render`]).
+//! draws them hatched and pale blue ([`super::render`]). A part that grows from a bone cut
+//! part-way ([`crate::restore::stump`]) takes that bone too: its ghost lies over the stump, at
+//! the length a restoration gives it ([`crate::fakir::support::complete_cut`]).
 //!
 //! **Donors** are the other statues of the configuration with the same template. Each is loaded
 //! once per run ([`Donors`]) with its cached fit and binding ([`super::statue`]); one without a
