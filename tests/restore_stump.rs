@@ -261,7 +261,7 @@ fn an_arm_cut_through_the_upper_arm_is_restored_without_a_hole() {
 fn a_bone_shrunk_onto_its_stump_gets_its_length_back_for_a_restoration() {
     use pygmalion::fakir::support::{complete_cut, complete_with};
     // The upper arm cut at 0.4, and fitted as FAKIR often leaves such a bone: shrunk onto its
-    // stump (0.45 of its length; held-out cuts were fitted at 0.43–0.88).
+    // stump (0.45 of its length; held-out cuts were fitted at 0.49–0.88).
     let target = statue(5, &["bone:l_upper_arm@0.4"]);
     let t = target.truth.template.clone();
     let idx = |n: &str| t.bone_index(n).unwrap();
@@ -300,6 +300,13 @@ fn a_bone_shrunk_onto_its_stump_gets_its_length_back_for_a_restoration() {
         err(&cut)
     );
     assert!(err(&cut) < 0.5 * err(&plain));
+    // Without a mirror that tells (its mirror shrunk too), it keeps its fitted length: the
+    // template's proportions alone do not tell a cut bone (the armless Venus de Milo's whole
+    // clavicles are fitted at half the template's length).
+    let mut both = fit.clone();
+    both.bones[mirror].length *= 0.45;
+    let kept = complete_cut(&both, &missing, Some(&healthy));
+    assert_eq!(kept.bones[ua].length, both.bones[ua].length);
     // A bone not shrunk (the truth), or a whole limb lost with it, keeps its length.
     let whole = complete_cut(&target.truth, &missing, Some(&healthy));
     assert_eq!(whole.bones[ua].length, target.truth.bones[ua].length);

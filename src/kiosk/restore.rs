@@ -34,8 +34,9 @@
 //! parent is the completed one (the mirror limb, [`crate::fakir::support`]) unless the
 //! current pose turned that bone (a preset pose names it), then the pose's. The render plugin
 //! draws them hatched and pale blue ([`super::render`]). A part that grows from a bone cut
-//! part-way ([`crate::restore::stump`]) takes that bone too: its ghost lies over the stump, at
-//! the length a restoration gives it ([`crate::fakir::support::complete_cut`]).
+//! part-way ([`crate::restore::stump`]) takes that bone too, but only its lost bones are
+//! ghosts ([`Part::lost_bones`]): the stump is the statue's own, and a tap on it selects the
+//! limb for posing as before.
 //!
 //! **Donors** are the other statues of the configuration with the same template. Each is loaded
 //! once per run ([`Donors`]) with its cached fit and binding ([`super::statue`]); one without a
@@ -241,7 +242,8 @@ pub enum Preparation {
 pub struct Restoration {
     /// Support of every bone (of the statue as found).
     pub support: Vec<BoneSupport>,
-    /// Its missing parts.
+    /// Its missing parts (each its lost bones, with the bone it grows from when that one is
+    /// cut part-way: [`Part::from`]).
     pub parts: Vec<Part>,
     /// Its skeleton with every missing bone completed.
     pub completed: Skeleton,
@@ -975,9 +977,11 @@ fn tap_ghosts(
             continue;
         }
         let missing = r.missing_parts(None);
+        // A part growing from a stump: the statue's own bone is no ghost (a tap on it selects
+        // the limb, as on any other), the lost bones are.
         let ghosts: Vec<usize> = missing
             .iter()
-            .flat_map(|&p| r.parts[p].bones.iter().copied())
+            .flat_map(|&p| r.parts[p].lost_bones().iter().copied())
             .collect();
         if ghosts.is_empty() {
             continue;
@@ -989,7 +993,7 @@ fn tap_ghosts(
             missing
                 .iter()
                 .copied()
-                .find(|&p| r.parts[p].bones.contains(&b))
+                .find(|&p| r.parts[p].lost_bones().contains(&b))
         });
         match part {
             Some(p) => {
@@ -1535,13 +1539,13 @@ fn place_ghosts(
         let parts = r.missing_parts(flying);
         let bones: Vec<usize> = parts
             .iter()
-            .flat_map(|&p| r.parts[p].bones.iter().copied())
+            .flat_map(|&p| r.parts[p].lost_bones().iter().copied())
             .collect();
         if !bones.is_empty() {
             let skel = ghost_skeleton(&pose.0, &fitted.0, &r.completed, &bones);
             let posed = skel.pose();
             for &p in &parts {
-                for &k in &r.parts[p].bones {
+                for &k in r.parts[p].lost_bones() {
                     wanted.push(GhostBone {
                         bone: k,
                         part: p,

@@ -133,7 +133,8 @@ pub struct Restored {
 }
 
 /// Restores `target` (fitted as `target_fit`) from `donors`: each part (a connected set of
-/// missing bones, or the bones named in `opts.parts`) is taken from the first donor that has it.
+/// missing bones, or the bones named in `opts.parts`, with the bone it hangs on when that one
+/// is cut part-way: [`stump`]) is taken from the first donor that has it.
 pub fn restore(
     target: &PointCloud,
     target_fit: &Skeleton,

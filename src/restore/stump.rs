@@ -47,7 +47,9 @@ pub const MIN_POINTS: usize = 20;
 /// fractions `(p − c₁)·(c₂ − c₁) / ‖c₂ − c₁‖²` of the points `positions` whose nearest bone
 /// (by signed distance, [`crate::geometry::bone::nearest_bone_where`]) is `bone` once the
 /// bones `absent` are left out — the lost part's bones, which have no points: completed at the
-/// joint, they would take the points round its sphere from a whole bone. `None` with fewer
+/// joint, they would take the points round its sphere from a whole bone — and that lie within
+/// the bone's mean radius of its surface (a plinth under a lost foot is nearest the shin, but
+/// not on it). `None` with fewer
 /// than [`MIN_POINTS`] such points or a degenerate bone. The fraction can pass 1 (the points
 /// round the end sphere) or be negative.
 pub fn stump_end(
@@ -64,9 +66,13 @@ pub fn stump_end(
         return None;
     }
     let prepared: Vec<PreparedBone> = posed.bones.iter().map(Bone::prepare).collect();
+    let band = 0.5 * (b.r1 + b.r2);
     let mut f: Vec<f32> = positions
         .par_iter()
-        .filter(|p| nearest_bone_where(&prepared, **p, |k| !absent.contains(&k)).0 == bone)
+        .filter(|p| {
+            let (k, d) = nearest_bone_where(&prepared, **p, |k| !absent.contains(&k));
+            k == bone && d <= band
+        })
         .map(|p| (*p - b.c1).dot(axis) / l2)
         .filter(|x| x.is_finite())
         .collect();
@@ -80,10 +86,10 @@ pub fn stump_end(
 
 /// Makes each part whose attach bone is a cut limb bone grow from that bone's stump (see the
 /// module docs): the attach bone is put first in `bones`, `attach` becomes its parent and
-/// `from` its [`stump_end`] (the part's bones left out; clamped to `[0, 1]`). Parts left as
-/// they are: a part already starting inside a bone, no attach bone, a trunk attach bone, an
-/// attach bone carrying a bone outside the part, or one whose points reach [`WHOLE`] of it (or
-/// are too few to tell).
+/// `from` its [`stump_end`] (the part's bones left out). Parts left as they are: a part
+/// already starting inside a bone, no attach bone, a trunk attach bone, an attach bone carrying
+/// a bone outside the part, or one whose points reach [`WHOLE`] of it, end at or before its
+/// first joint, or are too few to tell.
 pub fn start_at_stumps(parts: &mut [Part], positions: &[Vec3], skeleton: &Skeleton) {
     let t = &skeleton.template;
     let trunk = crate::fakir::solver::trunk_bones(t);
@@ -98,11 +104,13 @@ pub fn start_at_stumps(parts: &mut [Part], positions: &[Vec3], skeleton: &Skelet
         let Some(end) = stump_end(positions, skeleton, a, &part.bones) else {
             continue;
         };
-        if end >= WHOLE {
+        // An end at or before the joint says the fitted bone does not follow its points:
+        // the part stays as it was.
+        if !(end > 0.0) || end >= WHOLE {
             continue;
         }
         part.bones.insert(0, a);
         part.attach = t.bones[a].parent;
-        part.from = end.clamp(0.0, 1.0);
+        part.from = end;
     }
 }

@@ -41,6 +41,15 @@ pub struct Part {
     pub from: f32,
 }
 
+impl Part {
+    /// The part's missing bones: all of `bones`, but the first when the part grows from a
+    /// stump of it ([`Part::from`] > 0: the statue keeps that bone, cut part-way).
+    pub fn lost_bones(&self) -> &[usize] {
+        let kept = usize::from(self.from > 0.0).min(self.bones.len());
+        &self.bones[kept..]
+    }
+}
+
 /// Groups the missing bones (`missing[k]`) into parts: each missing bone whose parent is
 /// present starts a part, which takes every missing bone below it.
 pub fn parts_of(t: &Template, missing: &[bool]) -> Vec<Part> {
@@ -97,12 +106,14 @@ pub struct Transferred {
     pub cloud: PointCloud,
     /// Donor bone of each point.
     pub bones: Vec<u32>,
-    /// True for the margin points (on the attach bone, for the overlap).
+    /// True for the margin points, for the overlap: on the attach bone, or for a part growing
+    /// from a stump on its first bone before [`Part::from`].
     pub margin: Vec<bool>,
     /// Donor point index of each point (where it came from, e.g. to animate it in).
     pub indices: Vec<u32>,
     /// The skeleton the donor was deformed to: the target's, with the donor's relative
-    /// rotations for the part's bones under [`PoseSource::Donor`] (the part's points lie on it).
+    /// rotations for the part's lost bones ([`Part::lost_bones`]) under [`PoseSource::Donor`]
+    /// (the part's points lie on it).
     pub skeleton: Skeleton,
 }
 
@@ -135,8 +146,7 @@ pub fn transfer(
     let mut goal = target.clone();
     if opts.pose == PoseSource::Donor {
         // A part growing from a stump keeps the stump's direction: the statue tells it.
-        let skip = usize::from(part.from > 0.0);
-        for &k in &part.bones[skip..] {
+        for &k in part.lost_bones() {
             goal.bones[k].rotation = donor_fit.bones[k].rotation;
         }
         goal.enforce_constraints();
