@@ -11,7 +11,8 @@ use pygmalion::rng::Rng;
 use pygmalion::synth::{Cut, SynthOptions, SynthStatue, generate};
 use std::sync::Arc;
 
-fn statue(seed: u64, cuts: &[&str]) -> SynthStatue {
+/// A synthetic human of 20,000 points (height 1) with `cuts` (the generator's syntax).
+pub(crate) fn statue(seed: u64, cuts: &[&str]) -> SynthStatue {
     let t = Arc::new(Template::builtin("human").unwrap());
     generate(
         t,
@@ -23,6 +24,16 @@ fn statue(seed: u64, cuts: &[&str]) -> SynthStatue {
         },
     )
     .unwrap()
+}
+
+/// A synthetic statue as a donor, its truth as its fit, its missing bones judged by support.
+pub(crate) fn donor_of(d: &SynthStatue) -> Donor<'_> {
+    Donor {
+        name: "donor".into(),
+        cloud: &d.cloud,
+        fit: &d.truth,
+        missing: None,
+    }
 }
 
 fn missing(st: &SynthStatue) -> Vec<String> {
@@ -45,7 +56,7 @@ fn the_missing_bones_are_the_cut_ones() {
 }
 
 /// Signed distance to the union of a skeleton's bones.
-fn sdf(p: Vec3, bones: &[pygmalion::geometry::bone::PreparedBone]) -> f32 {
+pub(crate) fn sdf(p: Vec3, bones: &[pygmalion::geometry::bone::PreparedBone]) -> f32 {
     bones
         .iter()
         .map(|b| b.sdf_fast(p))
@@ -59,12 +70,7 @@ fn a_cut_forearm_is_restored_from_a_different_donor_in_a_single_layer() {
     let r = restore(
         &target.cloud,
         &target.truth,
-        &[Donor {
-            name: "donor".into(),
-            cloud: &donor.cloud,
-            fit: &donor.truth,
-            missing: None,
-        }],
+        &[donor_of(&donor)],
         &RestoreOptions {
             pose: PoseSource::Keep,
             ..Default::default()
@@ -279,12 +285,7 @@ fn the_registrations_verdict_decides_what_is_missing() {
     let kept = missing_bones(&target.cloud, &target.truth, Some(&told)).unwrap();
     assert_eq!(names(&kept), ["r_foot"]);
     assert!(missing_bones(&target.cloud, &target.truth, Some(&told[..3])).is_err());
-    let donors = [Donor {
-        name: "donor".into(),
-        cloud: &donor.cloud,
-        fit: &donor.truth,
-        missing: None,
-    }];
+    let donors = [donor_of(&donor)];
     // A registration that found nothing lost: nothing to restore, and it says how to ask.
     let e = restore(
         &target.cloud,

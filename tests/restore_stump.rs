@@ -2,31 +2,15 @@
 //! synthetic statues cut at known fractions, and a restoration through a cut upper arm that
 //! leaves no hole between the stump and the donor's part.
 
-use pygmalion::anatomy::Template;
+use crate::restore::{donor_of, sdf, statue};
 use pygmalion::geometry::Bone;
 use pygmalion::geometry::bone::PreparedBone;
 use pygmalion::math::Vec3;
 use pygmalion::restore::stump::{MIN_POINTS, WHOLE, start_at_stumps, stump_end};
 use pygmalion::restore::transfer::{PoseSource, TransferOptions, parts_of, transfer};
-use pygmalion::restore::{Donor, FROM_TARGET, RestoreOptions, restore};
+use pygmalion::restore::{FROM_TARGET, RestoreOptions, restore};
 use pygmalion::rng::Rng;
 use pygmalion::skinning::Binding;
-use pygmalion::synth::{Cut, SynthOptions, SynthStatue, generate};
-use std::sync::Arc;
-
-fn statue(seed: u64, cuts: &[&str]) -> SynthStatue {
-    let t = Arc::new(Template::builtin("human").unwrap());
-    generate(
-        t,
-        &SynthOptions {
-            points: 20_000,
-            seed,
-            cuts: cuts.iter().map(|c| Cut::parse(c).unwrap()).collect(),
-            ..Default::default()
-        },
-    )
-    .unwrap()
-}
 
 #[test]
 fn a_stumps_end_is_where_its_cut_was() {
@@ -165,14 +149,6 @@ fn only_a_part_hanging_on_a_cut_limb_bone_grows_from_it() {
     assert_eq!(parts[0].from, 0.0);
 }
 
-/// Signed distance to the union of a skeleton's bones.
-fn sdf(p: Vec3, bones: &[PreparedBone]) -> f32 {
-    bones
-        .iter()
-        .map(|b| b.sdf_fast(p))
-        .fold(f32::INFINITY, f32::min)
-}
-
 #[test]
 fn an_arm_cut_through_the_upper_arm_is_restored_without_a_hole() {
     // The forearm and hand of a statue cut at 0.3 of its left upper arm, restored from a
@@ -184,12 +160,7 @@ fn an_arm_cut_through_the_upper_arm_is_restored_without_a_hole() {
     let r = restore(
         &target.cloud,
         &target.truth,
-        &[Donor {
-            name: "donor".into(),
-            cloud: &donor.cloud,
-            fit: &donor.truth,
-            missing: None,
-        }],
+        &[donor_of(&donor)],
         &RestoreOptions {
             pose: PoseSource::Keep,
             ..Default::default()
@@ -322,12 +293,7 @@ fn a_bone_shrunk_onto_its_stump_gets_its_length_back_for_a_restoration() {
     let r = restore(
         &target.cloud,
         &fit,
-        &[Donor {
-            name: "donor".into(),
-            cloud: &donor.cloud,
-            fit: &donor.truth,
-            missing: None,
-        }],
+        &[donor_of(&donor)],
         &RestoreOptions {
             target_missing: Some(missing.clone()),
             ..Default::default()
