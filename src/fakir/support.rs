@@ -228,25 +228,27 @@ pub fn complete_with(fitted: &Skeleton, redo: &[bool], healthy: Option<&[bool]>)
 }
 
 /// [`complete_with`] for a restoration, with each bone cut part-way given back its length (our
-/// choice; `crate::restore` and the kiosk's part swapping use it, the registration's fit keeps
-/// the bone as fitted, its support telling where the break is): a limb bone kept (not in
-/// `redo`, not a trunk bone) whose children are all redone, fitted shorter than [`SHRUNK`] ×
-/// the template's proportions at the statue's scale — FAKIR shrank it onto its stump — gets
-/// its mirror's fitted length when that mirror is kept and not itself shrunk, along its fitted
-/// direction (radii kept); without such a mirror it stays as fitted (the template's
-/// proportions alone would take the *Venus de Milo*'s clavicles, whole but fitted at half the
-/// template's length, for shrunk ones and double them). The lost bones
-/// then hang where the limb's joint was, not at the stump's end, and the restored part grows
-/// from the stump ([`crate::restore::stump`]). The lost bones' expected sizes are then those
-/// of [`complete_with`] over the lengthened skeleton: a lost mirror of the lengthened bone
-/// takes its new length. Measured on 40 held-out synthetic statues cut
-/// part-way through a bone (`synth --rigid --height 1.7 --cut bone:B@F`, registered by
-/// `register`): of the 20 cut bones kept with their children lost, 16 were fitted at
-/// 0.49–0.88 of their true length, 10 of them flagged shrunk; one whole bone with a lost child
-/// was flagged (seed 338, whose fit lost the wrong limb). It acted on 9 of the 10 (one had no
-/// usable mirror): the cut bone's far joint moved nearer its truth on 6 and farther on 3, the
-/// mean distance from 12.2% to 10.2% of the height (the synthetic statues' left and right
-/// bones differ by up to ±30% each, so the mirror's length is only a plausible one).
+/// choice; `crate::restore` and the kiosk's part swapping use it, while the registration's fit
+/// keeps the bone as fitted, its support telling where the break is).
+///
+/// **Which bones.** A limb bone kept (not in `redo`, not a trunk bone) whose children are all
+/// redone, fitted shorter than [`SHRUNK`] × the template's proportions at the statue's scale:
+/// FAKIR shrank it onto its stump. It gets its mirror's fitted length when that mirror is kept
+/// and not shrunk itself, along its fitted direction (radii kept); without such a mirror it
+/// stays as fitted — the template's proportions alone would take the *Venus de Milo*'s
+/// clavicles, whole but fitted at half the template's length, for shrunk ones and double them.
+/// The lost bones then hang where the limb's joint was, not at the stump's end, and the
+/// restored part grows from the stump ([`crate::restore::stump`]); their expected sizes are
+/// [`complete_with`]'s over the lengthened skeleton.
+///
+/// **Measured** on 40 held-out synthetic statues cut part-way through a bone (`synth --rigid
+/// --height 1.7 --cut bone:B@F`, registered by `register`): of the 20 cut bones kept with their
+/// children lost, 16 were fitted at 0.49–0.88 of their true length, 10 of them flagged shrunk;
+/// one whole bone with a lost child was flagged (seed 338, whose fit lost the wrong limb). It
+/// acted on 9 of the 10 (one had no usable mirror): the cut bone's far joint moved nearer its
+/// truth on 6 and farther on 3, the mean distance from 12.2% to 10.2% of the height (the
+/// synthetic statues' left and right bones differ by up to ±30% each, so the mirror's length is
+/// only a plausible one).
 pub fn complete_cut(fitted: &Skeleton, redo: &[bool], healthy: Option<&[bool]>) -> Skeleton {
     let t = &fitted.template;
     let (_, shrunk) = expected_sizes(fitted, healthy);
