@@ -6,7 +6,7 @@ use pygmalion::fakir::support::support;
 use pygmalion::geometry::Bone;
 use pygmalion::math::Vec3;
 use pygmalion::restore::transfer::PoseSource;
-use pygmalion::restore::{Donor, FROM_TARGET, RestoreOptions, restore};
+use pygmalion::restore::{Donor, FROM_TARGET, RestoreOptions, Restored, restore};
 use pygmalion::rng::Rng;
 use pygmalion::synth::{Cut, SynthOptions, SynthStatue, generate};
 use std::sync::Arc;
@@ -34,6 +34,44 @@ pub(crate) fn donor_of(d: &SynthStatue) -> Donor<'_> {
         fit: &d.truth,
         missing: None,
     }
+}
+
+/// `target` (its truth as its fit) restored from `donor` in the target's pose
+/// ([`PoseSource::Keep`]), every target point kept.
+pub(crate) fn restore_keeping_pose(target: &SynthStatue, donor: &SynthStatue) -> Restored {
+    let r = restore(
+        &target.cloud,
+        &target.truth,
+        &[donor_of(donor)],
+        &RestoreOptions {
+            pose: PoseSource::Keep,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let n_target = r.source.iter().filter(|&&s| s == FROM_TARGET).count();
+    assert_eq!(n_target, target.cloud.len(), "every target point is kept");
+    r
+}
+
+/// A random point of bone `k`'s surface outside every other bone (`None` when hidden), and
+/// whether a point of `cloud` lies within `tol` of it.
+pub(crate) fn visible_sample(
+    bones: &[pygmalion::geometry::bone::PreparedBone],
+    k: usize,
+    cloud: &[Vec3],
+    tol: f32,
+    rng: &mut Rng,
+) -> Option<(Vec3, bool)> {
+    let (p, _) = bones[k].sample_surface(rng);
+    if bones
+        .iter()
+        .enumerate()
+        .any(|(j, b)| j != k && b.sdf_fast(p) < 0.0)
+    {
+        return None;
+    }
+    Some((p, cloud.iter().any(|q| (*q - p).length() < tol)))
 }
 
 fn missing(st: &SynthStatue) -> Vec<String> {
@@ -67,20 +105,9 @@ pub(crate) fn sdf(p: Vec3, bones: &[pygmalion::geometry::bone::PreparedBone]) ->
 fn a_cut_forearm_is_restored_from_a_different_donor_in_a_single_layer() {
     let target = statue(5, &["bone:l_forearm", "bone:l_hand"]);
     let donor = statue(9, &[]);
-    let r = restore(
-        &target.cloud,
-        &target.truth,
-        &[donor_of(&donor)],
-        &RestoreOptions {
-            pose: PoseSource::Keep,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let r = restore_keeping_pose(&target, &donor);
     assert_eq!(r.report.parts.len(), 1);
     assert_eq!(r.report.parts[0].bones, ["l_forearm", "l_hand"]);
-    let n_target = r.source.iter().filter(|&&s| s == FROM_TARGET).count();
-    assert_eq!(n_target, target.cloud.len(), "every target point is kept");
     let posed = r.skeleton.pose();
     let bones: Vec<_> = posed.bones.iter().map(Bone::prepare).collect();
     // The new points lie on the completed statue's surface (height 1).
@@ -118,17 +145,10 @@ fn a_cut_forearm_is_restored_from_a_different_donor_in_a_single_layer() {
             .position(|b| b.name == name)
             .unwrap();
         for _ in 0..400 {
-            let (p, _) = bones[k].sample_surface(&mut rng);
-            if bones
-                .iter()
-                .enumerate()
-                .any(|(j, b)| j != k && b.sdf_fast(p) < 0.0)
+            if let Some((_, covered)) = visible_sample(&bones, k, &r.cloud.positions, tol, &mut rng)
             {
-                continue;
-            }
-            seen += 1;
-            if r.cloud.positions.iter().any(|q| (*q - p).length() < tol) {
-                hit += 1;
+                seen += 1;
+                hit += usize::from(covered);
             }
         }
     }
