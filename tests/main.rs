@@ -19,6 +19,7 @@ mod cloud_grid;
 mod cloud_normals;
 mod cloud_ply;
 mod fakir;
+mod fakir_broken;
 mod fakir_bust;
 mod fakir_frame;
 mod fakir_pair;

@@ -110,7 +110,7 @@ fn up_of(fit: &Fit) -> Vec3 {
 }
 
 /// The figure's points of `positions` under `fit` (those not labelled [`BASE_LABEL`]).
-fn figure<'a>(fit: &'a Fit, positions: &'a [Vec3]) -> impl Iterator<Item = Vec3> + 'a {
+pub(super) fn figure<'a>(fit: &'a Fit, positions: &'a [Vec3]) -> impl Iterator<Item = Vec3> + 'a {
     positions
         .iter()
         .zip(&fit.labels)

@@ -12,10 +12,13 @@
 //! | automatic initial placement (PCA, candidate orientations) | [`init`] |
 //! | which bones the scan covers (support), lost limbs and their completion | [`support`] |
 //! | the bust hypothesis (a portrait bust fitted without its limbs) | [`bust`] |
+//! | the pair hypotheses (both arms or legs lost, a Venus) | [`pair`] |
+//! | the broken-limb hypothesis (a limb broken part-way, curled by the fit) | [`broken`] |
 //! | the working units (a power-of-two scale, a shift for far clouds) | [`frame`] |
 //! | levels, the resumable `step(budget)` registration | [`registration`] |
 
 pub mod assign;
+pub mod broken;
 pub mod bust;
 pub mod frame;
 pub mod init;

@@ -773,7 +773,9 @@ fn working_frame(cloud: &PointCloud) -> Option<WorkingFrame> {
 /// thigh beside a whole mirror is registered again with both lost, kept on the same two
 /// tests; else one that lost a forearm or a shin, one bone down, kept on
 /// [`super::pair::Hypothesis::keeps`]'s. Each only when
-/// [`super::pair::Hypothesis::worth_trying`].
+/// [`super::pair::Hypothesis::worth_trying`]. Last (no other fit kept), the broken-limb
+/// hypothesis ([`super::broken`]): a limb pulled short by its fit is registered again with
+/// one more of its bones lost, kept when its mean distance falls clearly.
 fn register_in(
     frame: Option<WorkingFrame>,
     cloud: &PointCloud,
@@ -808,6 +810,30 @@ fn register_in(
         let pair = register_once(frame, cloud, template.clone(), &hypothesis.opts, pause)?;
         if hypothesis.keeps(&whole, &pair, &cloud.positions)? {
             return Ok(pair);
+        }
+    }
+    if let Some(hypothesis) = super::broken::hypothesis(&template, opts, &whole) {
+        pause.attempt(Attempt::Broken);
+        let broken = register_once(frame, cloud, template.clone(), &hypothesis.opts, pause)?;
+        if hypothesis.keeps(&whole, &broken) {
+            if super::broken::trunk_shift(&whole, &broken, &cloud.positions)
+                < super::broken::TRUNK_MOVED
+            {
+                return Ok(broken);
+            }
+            // A better placement, not a lost bone: fitted again from it, nothing lost from
+            // the start.
+            pause.attempt(Attempt::Broken);
+            let again = register_once(
+                frame,
+                cloud,
+                template.clone(),
+                &hypothesis.again(&broken),
+                pause,
+            )?;
+            if hypothesis.keeps(&whole, &again) {
+                return Ok(again);
+            }
         }
     }
     Ok(whole)

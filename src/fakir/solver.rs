@@ -76,16 +76,20 @@ pub enum Attempt {
     /// Again without a lost forearm or shin and its mirror, one bone down
     /// ([`super::pair::Level::Below`]): a Venus whose whole fit kept one arm.
     PairBelow,
+    /// Again with one more bone of a limb lost ([`super::broken`]): a limb broken part-way
+    /// whose fit curled the bones below the break.
+    Broken,
 }
 
 impl Attempt {
-    /// A short name for progress lines: "whole", "bust", "pair", "pair below".
+    /// A short name for progress lines: "whole", "bust", "pair", "pair below", "broken limb".
     pub fn name(self) -> &'static str {
         match self {
             Attempt::Whole => "whole",
             Attempt::Bust => "bust",
             Attempt::Pair => "pair",
             Attempt::PairBelow => "pair below",
+            Attempt::Broken => "broken limb",
         }
     }
 }
