@@ -4,7 +4,7 @@
 use std::sync::Arc;
 
 use pygmalion::anatomy::{Skeleton, Template};
-use pygmalion::fakir::broken::{COST, hypothesis};
+use pygmalion::fakir::broken::{COST, END_COVERAGE, hypothesis};
 use pygmalion::fakir::support::lost_from_names;
 use pygmalion::fakir::{Fit, Init, RegistrationOptions};
 
@@ -108,13 +108,31 @@ fn a_broken_limb_fit_is_kept_only_when_its_mean_distance_falls_clearly() {
     let t = human();
     let whole = fit(&t, &[], &["l_clavicle"]);
     let h = hypothesis(&t, &RegistrationOptions::default(), &whole).unwrap();
-    let mut second = fit(&t, &["l_hand"], &[]);
+    // The second fit: the hand lost and completed where the scan has nothing.
+    let bare_hand = |mut f: Fit| {
+        let hand = t.bone_index("l_hand").unwrap();
+        f.support[hand].coverage = 0.0;
+        f
+    };
+    let mut second = bare_hand(fit(&t, &["l_hand"], &[]));
     second.mean_distance = COST - 0.01;
     assert!(h.keeps(&whole, &second));
+    // The completed hand lying on scan points: a hand the statue has.
+    let mut covered = fit(&t, &["l_hand"], &[]);
+    covered.mean_distance = COST - 0.01;
+    let hand = t.bone_index("l_hand").unwrap();
+    covered.support[hand].coverage = END_COVERAGE + 0.05;
+    assert!(!h.keeps(&whole, &covered));
     second.mean_distance = COST + 0.01;
     assert!(!h.keeps(&whole, &second));
     second.mean_distance = 1.2;
     assert!(!h.keeps(&whole, &second));
+    // Cheaper, but the clavicle that triggered it is still shrunk: the lost hand did not
+    // explain the pull.
+    let mut still = bare_hand(fit(&t, &["l_hand"], &["l_clavicle"]));
+    still.mean_distance = COST - 0.01;
+    assert!(!h.keeps(&whole, &still));
+    assert_eq!(h.pulled, vec![t.bone_index("l_clavicle").unwrap()]);
 }
 
 #[test]

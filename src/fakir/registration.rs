@@ -823,7 +823,7 @@ fn register_in(
             }
             // A better placement, not a lost bone: fitted again from it, nothing lost from
             // the start.
-            pause.attempt(Attempt::Broken);
+            pause.attempt(Attempt::BrokenAgain);
             let again = register_once(
                 frame,
                 cloud,
@@ -831,7 +831,7 @@ fn register_in(
                 &hypothesis.again(&broken),
                 pause,
             )?;
-            if hypothesis.keeps(&whole, &again) {
+            if again.mean_distance < super::broken::COST * whole.mean_distance {
                 return Ok(again);
             }
         }

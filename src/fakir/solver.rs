@@ -79,10 +79,14 @@ pub enum Attempt {
     /// Again with one more bone of a limb lost ([`super::broken`]): a limb broken part-way
     /// whose fit curled the bones below the break.
     Broken,
+    /// Once more, from the broken-limb fit's better placement, nothing lost from the start
+    /// ([`super::broken::Hypothesis::again`]).
+    BrokenAgain,
 }
 
 impl Attempt {
-    /// A short name for progress lines: "whole", "bust", "pair", "pair below", "broken limb".
+    /// A short name for progress lines: "whole", "bust", "pair", "pair below", "broken limb",
+    /// "broken limb, again".
     pub fn name(self) -> &'static str {
         match self {
             Attempt::Whole => "whole",
@@ -90,6 +94,7 @@ impl Attempt {
             Attempt::Pair => "pair",
             Attempt::PairBelow => "pair below",
             Attempt::Broken => "broken limb",
+            Attempt::BrokenAgain => "broken limb, again",
         }
     }
 }

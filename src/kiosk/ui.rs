@@ -286,9 +286,11 @@ pub fn fitting_text(texts: &Texts, percent: u32) -> String {
 pub fn attempt_text(texts: &Texts, attempt: Attempt, percent: u32) -> String {
     match attempt {
         Attempt::Whole => fitting_text(texts, percent),
-        Attempt::Bust | Attempt::Pair | Attempt::PairBelow | Attempt::Broken => {
-            with_percent(&texts.fitting_again, percent)
-        }
+        Attempt::Bust
+        | Attempt::Pair
+        | Attempt::PairBelow
+        | Attempt::Broken
+        | Attempt::BrokenAgain => with_percent(&texts.fitting_again, percent),
     }
 }
 
