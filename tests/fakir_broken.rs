@@ -5,7 +5,6 @@ use std::sync::Arc;
 
 use pygmalion::anatomy::{Skeleton, Template};
 use pygmalion::fakir::broken::{COST, END_COVERAGE, hypothesis};
-use pygmalion::fakir::support::lost_from_names;
 use pygmalion::fakir::{Fit, Init, RegistrationOptions};
 
 fn human() -> Arc<Template> {
@@ -15,24 +14,13 @@ fn human() -> Arc<Template> {
 /// The rest skeleton as a whole fit with the limbs of `lost` (each with what it carries)
 /// missing and the bones of `shrunk` flagged shrunk; mean distance 1.
 fn fit(t: &Arc<Template>, lost: &[&str], shrunk: &[&str]) -> Fit {
-    let names: Vec<String> = lost.iter().map(|s| s.to_string()).collect();
-    let mut support = crate::common::full_support(t);
-    for s in &mut support {
+    let mut f = crate::fakir_pair::fit_missing(t, lost);
+    f.mean_distance = 1.0;
+    f.support = crate::common::full_support(t);
+    for s in &mut f.support {
         s.shrunk = shrunk.contains(&s.bone.as_str());
     }
-    Fit {
-        skeleton: Skeleton::rest(t.clone()),
-        labels: Vec::new(),
-        mean_distance: 1.0,
-        base: None,
-        bone_counts: vec![0; t.bones.len()],
-        iterations: 0,
-        units: 0,
-        candidate: 0,
-        candidate_distances: Vec::new(),
-        support,
-        missing: lost_from_names(t, &names).unwrap(),
-    }
+    f
 }
 
 /// The bone the hypothesis on `whole` loses, if one is tried.

@@ -15,7 +15,7 @@ use pygmalion::synth::{Cut, SynthOptions, generate};
 
 /// The rest skeleton of the human template as a whole fit with the limbs of `lost` (each
 /// with what it carries) missing.
-fn fit_missing(t: &Arc<Template>, lost: &[&str]) -> Fit {
+pub(crate) fn fit_missing(t: &Arc<Template>, lost: &[&str]) -> Fit {
     let names: Vec<String> = lost.iter().map(|s| s.to_string()).collect();
     let skeleton = Skeleton::rest(t.clone());
     Fit {
