@@ -40,18 +40,17 @@
 //! hypothesis has its length back in it (no longer shrunk, or lost). On seeds 333, 337 and
 //! 339 the clavicle came back to 0.34, 0.34 and 0.31 (true 0.34, 0.36, 0.37). A complete
 //! statue whose bone is simply short (the synthetic statues' proportions vary by ±30% per
-//! bone) keeps it short whatever the hand does: the posed seed 23 at 6,000 points had its
-//! healthy left hand taken lost at under 0.95 times the mean distance before this guard.
-//! That one guard was not enough: the posed seed 23 at 6,000 points (subsample 4,000),
-//! complete, scored 0.69 with its clavicle released and its trunk in place (0.48% of the
-//! diagonal). What told it apart is its hand: completed in the second fit, it lay half on
+//! bone) mostly keeps it short whatever the hand does. That guard alone was not enough: the
+//! complete posed seed 23 at 6,000 points (subsample 4,000) scored 0.69 with its clavicle
+//! released and its trunk in place (0.48% of the diagonal), and lost its healthy left hand.
+//! What told it apart is its hand: completed in the second fit, it lay half on
 //! the hand the scan has (coverage 0.27), where the really lost ends of seeds 333, 337 and
 //! 339 covered nothing (0.0). So the limb's end, completed, must cover under
 //! [`END_COVERAGE`] (0.15) of its surface (the *Faun*'s raised hand: 0.12).
 //!
 //! **Measured** (release `register`, 2026-12-05; details in `README.md`, "The broken-limb
 //! hypothesis"): on twenty cut statues drawn at random (seeds 330–349, 30k points) it
-//! triggers on 8 and keeps 4: lost sets right on 13 instead of 11, the median joint error
+//! triggers on 8 and keeps 3: lost sets right on 13 instead of 11, the median joint error
 //! over the joints the scan has 0.91% → 0.65% of the height (333 1.69% → 0.36%, 337 10.61%
 //! → 0.36%, 339 0.99% → 0.36%). The held-out cuts 300–319 are unchanged; on the sixteen
 //! complete posed statues of `fakir/accuracy_posed` it triggers on 5 and rejects each (1.44
@@ -142,7 +141,7 @@ pub fn hypothesis(
 }
 
 /// The limb's chain from its first bone `first` down (each bone's child in the same chain).
-fn limb_chain(template: &Template, first: usize) -> Vec<usize> {
+pub(super) fn limb_chain(template: &Template, first: usize) -> Vec<usize> {
     let mut chain = vec![first];
     let id = template.bones[first].chain.map(|c| c.0);
     while let Some(&c) = chain.last().and_then(|&b| {

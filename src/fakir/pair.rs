@@ -233,9 +233,7 @@ fn at_level(
         let b = match level {
             Level::Limb => first,
             // The first bone's child in its chain.
-            Level::Below => *template.bones[first].children.iter().find(|&&c| {
-                template.bones[c].chain.map(|x| x.0) == template.bones[first].chain.map(|x| x.0)
-            })?,
+            Level::Below => *super::broken::limb_chain(template, first).get(1)?,
         };
         let m = mirrors.get(b).copied().flatten()?;
         let whole_lost = template.subtree(b).into_iter().all(lost);
