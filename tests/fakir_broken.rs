@@ -62,11 +62,36 @@ fn no_broken_limb_is_tried_on_a_limb_that_is_not_pulled_short() {
     assert_eq!(loses(&t, &fit(&t, &[], &["l_hand"])), None);
     // A trunk bone shrunk: not a limb's.
     assert_eq!(loses(&t, &fit(&t, &[], &["spine_lower", "neck"])), None);
-    // The whole arm lost, or everything below its first bone: the pair hypotheses' case.
+    // The whole arm lost: the pair hypotheses' case.
     assert_eq!(loses(&t, &fit(&t, &["l_upper_arm"], &["l_clavicle"])), None);
+    // Everything below the first bone lost, neither it nor the clavicle shrunk.
+    assert_eq!(loses(&t, &fit(&t, &["l_forearm"], &[])), None);
+}
+
+#[test]
+fn a_limb_lost_below_its_shrunk_first_bone_is_tried_without_it() {
+    let t = human();
+    // The forearm and hand lost, the upper arm kept short over the shoulder: the whole arm
+    // lost at the shoulder is tried.
+    let h = hypothesis(
+        &t,
+        &RegistrationOptions::default(),
+        &fit(&t, &["r_forearm"], &["r_upper_arm"]),
+    )
+    .unwrap();
+    assert_eq!(h.bone, "r_upper_arm");
+    assert_eq!(h.end, t.bone_index("r_hand").unwrap());
+    // Its own shrinking is the pull the second fit must explain (it is lost there).
+    assert_eq!(h.pulled, vec![t.bone_index("r_upper_arm").unwrap()]);
+    // A leg: the shin and foot lost, the thigh shrunk.
     assert_eq!(
-        loses(&t, &fit(&t, &["l_forearm"], &["l_clavicle", "l_upper_arm"])),
-        None
+        loses(&t, &fit(&t, &["l_shin"], &["l_thigh"])).as_deref(),
+        Some("l_thigh")
+    );
+    // A shrunk clavicle pulls the first bone too.
+    assert_eq!(
+        loses(&t, &fit(&t, &["l_forearm"], &["l_clavicle"])).as_deref(),
+        Some("l_upper_arm")
     );
 }
 

@@ -48,6 +48,15 @@
 //! 339 covered nothing (0.0). So the limb's end, completed, must cover under
 //! [`END_COVERAGE`] (0.15) of its surface (the *Faun*'s raised hand: 0.12).
 //!
+//! **Lost at the root** (our choice, 2026-12-05). A limb lost whole at its first joint (an
+//! arm at the shoulder, a leg at the hip: `synth --cut bone:r_upper_arm`) often comes out
+//! with the bones below lost and the first bone kept, shrunk over the joint's surface. When
+//! the deepest present bone is the limb's first bone, its own shrinking counts as the pull
+//! (beside the clavicle's), and the figure is registered again with that first bone lost,
+//! under the same tests (its own loss then explains the pull). Seeds 362 and 367 (right arm
+//! cut at the shoulder): registered with the upper arm lost, 0.91 and 0.85 times the whole
+//! fit's mean distance; seed 302's thigh, cut at 0.3 (a real stump, shrunk): 2.11 times.
+//!
 //! **Measured** (release `register`, 2026-12-05; details in `README.md`, "The broken-limb
 //! hypothesis"): on twenty cut statues drawn at random (seeds 330–349, 30k points) it
 //! triggers on 8 and keeps 3: lost sets right on 13 instead of 11, the median joint error
@@ -110,18 +119,22 @@ pub fn hypothesis(
             return None;
         }
         let chain = limb_chain(template, first);
-        // The deepest present bone; the first bone itself is the pair hypotheses' business.
+        // The deepest present bone (a lost first bone is the pair hypotheses' business).
         let k = chain.iter().rposition(|&b| !lost(b))?;
-        if k == 0 {
+        if k == 0 && chain.len() == 1 {
             return None;
         }
         // The limb bone the limb hangs from (a clavicle; not the pelvis block).
         let hangs_from = template.bones[first]
             .parent
             .filter(|&p| template.bones[p].kind != BoneKind::Block && !trunk[p]);
+        // The bones above the deepest present one; when that is the first bone (the rest of
+        // the limb lost), the first bone itself: a limb lost at its root whose first bone the
+        // fit kept, shrunk over the joint's surface.
+        let above = if k == 0 { &chain[..1] } else { &chain[..k] };
         let pulled: Vec<usize> = hangs_from
             .into_iter()
-            .chain(chain[..k].iter().copied())
+            .chain(above.iter().copied())
             .filter(|&b| shrunk(b))
             .collect();
         if pulled.is_empty() {

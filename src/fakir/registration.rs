@@ -326,7 +326,12 @@
 //!    length of a present end beside a present mirror (fed and covered: `lost_limbs`). The
 //!    first lost bone of a limb whose support reaches 0.3 to 0.5 of its length from its
 //!    first joint is kept as a stump, the bones below it lost (`is_stump`: not a hand laid
-//!    over its parent, nor below a parent stretched past its mirror). A limb taken lost
+//!    over its parent, nor below a parent stretched past its mirror, and holding at least a
+//!    tenth of its mirror's points). A limb bone carrying present bones is a **bridge**, lost
+//!    with all it carries, when it holds under a tenth of its mirror's points and its support
+//!    does not reach past its joint (`is_bridge`: the limb was lost at that joint and the
+//!    fit laid the bones below on another part); a mirror bone taken lost as empty below it
+//!    is kept (they had taken its points). A limb taken lost
 //!    though the scan covers it from end to end is kept (covered through: a forearm resting
 //!    on a thigh), unless its axis lies deep in the other bones or one of its bones is folded
 //!    back onto its parent beyond [`FOLDED`] (a limb laid back onto its stump).
@@ -1829,8 +1834,16 @@ fn examine_support(
 /// parent's guard. The laid-over-parent rule's hands (seeds 98, 120, 309: 0.4, 0.8, 0.4)
 /// lie over their parents' far half, the parent shortened to make room, so they stay lost
 /// (309's hand, cut at half its length, with them). A trial with the reach 0.3 to 0.9 and no
-/// guard (2026-11-29) lost seed 10's mended fit. One work unit per bone, and one per bone
-/// examined again.
+/// guard (2026-11-29) lost seed 10's mended fit. A stump must also be fed: at least
+/// [`STUMP_FED`] of its present mirror's points (a bone lost whole at its joint, shrunk onto
+/// the joint's surface, holds almost none). **A bridge** (our choice, 2026-12-05): a limb bone
+/// not hanging from the trunk, carrying bones not all lost, holding under [`STUMP_FED`] of its
+/// present mirror's points with its support reaching at most [`BRIDGE_REACH`] of its length,
+/// is lost with all it carries ([`is_bridge`]), and a mirror of a bone below it taken lost as
+/// empty is kept: the bones below the bridge lay on that mirror's place and took its points
+/// (they take them back when the skeleton is settled without the lost bones). A bone is
+/// examined as a bridge only when its children are not all lost (otherwise the tests above
+/// judge it). One work unit per bone, and one per bone examined again or taken as a bridge.
 fn lost_limbs(
     s: &mut Solver,
     support: &[BoneSupport],
@@ -1847,10 +1860,25 @@ fn lost_limbs(
     let mut only_redundant = vec![false; nb];
     // Bones taken by the laid-over-parent rule (never kept as a stump).
     let mut over_taken = vec![false; nb];
+    // Bones taken lost as empty (starved of every point), and bridges (see below).
+    let mut empty_taken = vec![false; nb];
+    let mut bridges = Vec::new();
     // Parents come before their children in a template's bone order.
     for b in (0..nb).rev() {
         let limb = t.bones[b].kind != BoneKind::Block && !trunk[b];
-        if lost[b] || !limb || !t.bones[b].children.iter().all(|&c| lost[c]) {
+        if lost[b] || !limb {
+            continue;
+        }
+        if !t.bones[b].children.iter().all(|&c| lost[c]) {
+            // A bridge: the limb was lost at this bone's joint, and the fit laid the bone
+            // across empty space so that the bones below it reach another part.
+            if is_bridge(s, support, (&mirror, &trunk), &lost, b) {
+                for c in t.subtree(b) {
+                    lost[c] = true;
+                }
+                bridges.push(b);
+                s.unit().map_err(cancelled)?;
+            }
             continue;
         }
         let bone = s.world.bones()[b];
@@ -1886,6 +1914,7 @@ fn lost_limbs(
             && s.removal_excess(b, &lost)
                 .is_some_and(|e| e < limit * radius);
         lost[b] = bare || over_parent || (!hangs_from_trunk && empty) || redundant;
+        empty_taken[b] = !bare && !over_parent && !hangs_from_trunk && empty;
         only_redundant[b] = redundant;
         over_taken[b] = over_parent;
         // Covered through: a limb bone carrying others, taken lost though it holds points,
@@ -1927,6 +1956,18 @@ fn lost_limbs(
         }
         s.unit().map_err(cancelled)?;
     }
+    // Below a bridge the fit laid the lost bones on another part, often on their mirrors'
+    // place: a mirror taken lost as empty had its points taken by them, and is kept (the
+    // bones settled without the lost ones take their points back).
+    let mut revived = vec![false; nb];
+    for &b in &bridges {
+        for c in t.subtree(b).into_iter().skip(1) {
+            if let Some(m) = mirror[c].filter(|&m| empty_taken[m] && !known[m]) {
+                lost[m] = false;
+                revived[m] = true;
+            }
+        }
+    }
     // Fed and covered: a last bone taken lost by the redundancy test alone, at its healthy
     // size, fed and covered like a present end, beside a present mirror, is kept.
     for b in 0..nb {
@@ -1938,8 +1979,10 @@ fn lost_limbs(
     // again: lost with no point of its own, or by the laid-over-parent rule, which then has
     // no healthy mirror to compare with and asks both ends to have shrunk instead.
     for b in (0..nb).rev() {
-        let again =
-            !lost[b] && t.bones[b].children.is_empty() && mirror[b].is_some_and(|m| lost[m]);
+        let again = !lost[b]
+            && !revived[b]
+            && t.bones[b].children.is_empty()
+            && mirror[b].is_some_and(|m| lost[m]);
         if again {
             let bone = s.world.bones()[b];
             let radius = 0.5 * (bone.r1 + bone.r2) as f64;
@@ -1974,6 +2017,8 @@ fn lost_limbs(
 /// bone's support reaches 0.0–0.2 (nothing past the joint), or 0.6–1.0 when FAKIR laid it
 /// over another part; and a parent stretched over the bone (a forearm reaching the tip of
 /// its hand, the hand hanging beside it) leaves the bone a stub of support at its root.
+/// A stump also holds at least [`STUMP_FED`] of its present mirror's points: a bone lost
+/// whole at its joint, shrunk onto the surface there, holds almost none.
 fn is_stump(
     s: &Solver,
     support: &[BoneSupport],
@@ -1989,8 +2034,60 @@ fn is_stump(
     let parent_stretched = mirror[p]
         .filter(|&m| !lost[m])
         .is_some_and(|m| l[p] > FED_LENGTH.1 * l[m]);
-    (STUMP_REACH.0..=STUMP_REACH.1).contains(&support[b].reach) && !parent_stretched
+    // A stump holds the points of the part the cut left: an end holding almost none of what
+    // its present mirror holds is a bone of a limb lost at its joint, shrunk onto the joint's
+    // surface (which its support then reaches part-way).
+    let unfed = mirror[b]
+        .filter(|&m| !lost[m])
+        .is_some_and(|m| (s.members_of(&[b]) as f64) < STUMP_FED * s.members_of(&[m]) as f64);
+    (STUMP_REACH.0..=STUMP_REACH.1).contains(&support[b].reach) && !parent_stretched && !unfed
 }
+
+/// The least share of its present mirror's points (the bone's own, not its subtree's) that
+/// the first lost bone of a limb must hold to be kept as a stump (`is_stump`). Our choice
+/// (2026-12-05): the stumps kept by the rule held 0.17 to 0.59 of their mirror's points at
+/// the end of their registrations (seeds 304, 308, 332, 335: a shin cut at 0.2, a forearm at
+/// 0.6, a shin at 0.3, a foot at 0.4). Bones lost whole at their joint (`--cut bone:B`) and
+/// kept partial held 0.009 (seed 355's right foot, shrunk to half its mirror's length over
+/// the shin's end, its support reaching 0.5), 0.053 and 0.072 (seeds 374 and 372: a shin and
+/// a thigh, reaching 0.4).
+pub const STUMP_FED: f64 = 0.1;
+
+/// The bridge rule of [`lost_limbs`] for limb bone `b`, not lost, carrying bones not all
+/// lost, not hanging from the trunk: `b` holds under [`STUMP_FED`] of its present mirror's
+/// points (its own, not its subtree's) and its support reaches at most [`BRIDGE_REACH`] of
+/// its length from its first joint. `mirror` and `trunk`: each bone's mirror and whether it
+/// is a trunk bone. The limb was lost at `b`'s joint and the fit laid `b` across empty space to reach
+/// another part with the bones below it (seed 365, `synth --seed 365 --rigid --height 1.7
+/// --cut bone:l_shin`: the shin 50 points against 2,150, reaching 0.1, its foot on other
+/// points; seed 353, the right shin 32 against 1,531, its foot on the left foot's place and
+/// the left foot taken lost as empty). Our choice (2026-12-05): `b` and all it carries are
+/// lost. Over the 200-odd `FIT.json` files of this project's evaluation runs (complete posed
+/// statues, real scans, cut statues), present bones carrying present bones with this
+/// signature were found only on statues whose limb was lost at that bone's joint (seeds
+/// 353, 356, 365).
+fn is_bridge(
+    s: &Solver,
+    support: &[BoneSupport],
+    (mirror, trunk): (&[Option<usize>], &[bool]),
+    lost: &[bool],
+    b: usize,
+) -> bool {
+    let t = &s.world.template;
+    let Some(m) = mirror[b].filter(|&m| m != b && !lost[m]) else {
+        return false;
+    };
+    // Not a limb's first bone hanging from the trunk (whose points are the trunk's surface
+    // as much as the limb's; see `lost_limbs`).
+    t.bones[b].parent.is_some_and(|p| !lost[p] && !trunk[p])
+        && support[b].reach <= BRIDGE_REACH
+        && (s.members_of(&[b]) as f64) < STUMP_FED * s.members_of(&[m]) as f64
+}
+
+/// The largest reach of its support (a share of its length, from its first joint) of a
+/// bridge ([`is_bridge`]): one bin of [`super::support::BINS`] at most, nothing past the
+/// joint.
+pub const BRIDGE_REACH: f32 = 0.1;
 
 /// The reach of its support (a share of its length, from its first joint) within which the
 /// first lost bone of a limb is a stump and kept (`is_stump`).
