@@ -2039,7 +2039,7 @@ fn is_stump(
     // surface (which its support then reaches part-way).
     let unfed = mirror[b]
         .filter(|&m| !lost[m])
-        .is_some_and(|m| (s.members_of(&[b]) as f64) < STUMP_FED * s.members_of(&[m]) as f64);
+        .is_some_and(|m| unfed(s, b, m));
     (STUMP_REACH.0..=STUMP_REACH.1).contains(&support[b].reach) && !parent_stretched && !unfed
 }
 
@@ -2081,7 +2081,13 @@ fn is_bridge(
     // as much as the limb's; see `lost_limbs`).
     t.bones[b].parent.is_some_and(|p| !lost[p] && !trunk[p])
         && support[b].reach <= BRIDGE_REACH
-        && (s.members_of(&[b]) as f64) < STUMP_FED * s.members_of(&[m]) as f64
+        && unfed(s, b, m)
+}
+
+/// Whether bone `b` holds under [`STUMP_FED`] of the points bone `m` (its mirror) holds,
+/// each counting its own points only (the stump and bridge rules of [`lost_limbs`]).
+fn unfed(s: &Solver, b: usize, m: usize) -> bool {
+    (s.members_of(&[b]) as f64) < STUMP_FED * s.members_of(&[m]) as f64
 }
 
 /// The largest reach of its support (a share of its length, from its first joint) of a
