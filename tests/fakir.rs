@@ -3686,3 +3686,49 @@ fn the_whole_chain_fit_settles_a_chain_whose_joints_are_all_off() {
 fn bits(x: &[f64]) -> Vec<u64> {
     x.iter().map(|v| v.to_bits()).collect()
 }
+
+#[test]
+fn solvers_sharing_their_points_search_structure_fit_exactly_like_solvers_building_their_own() {
+    use pygmalion::fakir::solver::NearPoints;
+    use std::sync::Arc;
+    // The papers' chain, fitted twice from the same start: once by a solver that builds its
+    // own k-d tree, grid and spacing, once by two solvers in turn sharing one `NearPoints`
+    // (the level-0 solvers of a registration share theirs). The same sums, bit for bit.
+    let s = chain4(3_000, 2, 0.0, 0.0, vec![]).unwrap();
+    let mut init = Skeleton::rest(s.truth.template.clone());
+    for b in &mut init.bones {
+        b.length = 35.0;
+        b.r1 = 7.0;
+        b.r2 = 7.0;
+    }
+    init.root_rotation = Quat::from_rotation_z(0.9);
+    let settings = ScheduleSettings::default();
+    let fit = |near: Option<Arc<NearPoints>>| {
+        let world = WorldSkeleton::from_skeleton(&init);
+        let asg = assignment_of(&s, 0.28);
+        let mut pause = NoPause;
+        let mut solver = match near {
+            Some(n) => Solver::with_near(world, asg, n, 1.0, SolverSettings::default(), &mut pause),
+            None => Solver::new(world, asg, 1.0, SolverSettings::default(), &mut pause),
+        };
+        solver.free_root = true;
+        register_chain(&mut solver, &[0, 1, 2, 3], &settings).unwrap();
+        (
+            solver.world.pose(),
+            solver.mean_distance(),
+            solver.occupancy(),
+            solver.spacing,
+        )
+    };
+    let own = fit(None);
+    let near = Arc::new(NearPoints::new(s.cloud.positions.clone()));
+    assert_eq!(near.points(), &s.cloud.positions[..]);
+    assert!(near.tree().is_some());
+    assert_eq!(near.spacing.to_bits(), own.3.to_bits());
+    for _ in 0..2 {
+        let shared = fit(Some(near.clone()));
+        assert_eq!(shared.0, own.0);
+        assert_eq!(shared.1.to_bits(), own.1.to_bits());
+        assert_eq!(shared.2.to_bits(), own.2.to_bits());
+    }
+}

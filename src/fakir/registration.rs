@@ -403,7 +403,8 @@ use super::frame::WorkingFrame;
 use super::init::{Candidate, Init, candidates, rescaled};
 use super::schedule::{ScheduleSettings, register_skeleton};
 use super::solver::{
-    Activity, Attempt, Cancelled, NoPause, Pause, Solver, SolverSettings, template_extent,
+    Activity, Attempt, Cancelled, NearPoints, NoPause, Pause, Solver, SolverSettings,
+    template_extent,
 };
 use super::support::{
     BoneSupport, SPACING_CHUNK, SupportExam, add_spacings, better, collapse, complete_with,
@@ -789,8 +790,15 @@ fn register_in(
     pause: &mut dyn Pause,
 ) -> Result<Fit> {
     let whole = register_once(frame, cloud, template.clone(), opts, pause)?;
-    if let Some(bust_opts) = super::bust::hypothesis(&template, opts)
-        && super::bust::squeeze(&whole, &cloud.positions) > super::bust::SQUEEZE
+    // Between registrations each pass over the cloud is a unit of its own (the bust's
+    // squeeze, each pair hypothesis' test; on 100k points they and the end of the fit had
+    // made one unit of 3.4 ms).
+    pause.unit(None).map_err(cancelled)?;
+    let bust = super::bust::hypothesis(&template, opts)
+        .map(|o| (o, super::bust::squeeze(&whole, &cloud.positions)));
+    pause.unit(None).map_err(cancelled)?;
+    if let Some((bust_opts, squeeze)) = bust
+        && squeeze > super::bust::SQUEEZE
     {
         pause.attempt(Attempt::Bust);
         let bust = register_once(frame, cloud, template.clone(), &bust_opts, pause)?;
@@ -804,7 +812,9 @@ fn register_in(
     for hypothesis in super::pair::hypotheses(&template, opts, &whole) {
         // Not worth a registration when the mirror limb explains points that no other bone
         // of the whole fit comes near (a healthy arm or leg).
-        if !hypothesis.worth_trying(&whole, &cloud.positions)? {
+        let worth = hypothesis.worth_trying(&whole, &cloud.positions)?;
+        pause.unit(None).map_err(cancelled)?;
+        if !worth {
             continue;
         }
         // Each level its own attempt: the kiosk's bar starts again from 0 for the second.
@@ -854,12 +864,10 @@ fn register_once(
 ) -> Result<Fit> {
     match frame {
         Some(f) => {
-            let fit = register_here(
-                &f.cloud_to_working(cloud),
-                template,
-                &f.options_to_working(opts),
-                pause,
-            )?;
+            let working = f.cloud_to_working(cloud);
+            pause.unit(None).map_err(cancelled)?;
+            let fit = register_here(&working, template, &f.options_to_working(opts), pause)?;
+            pause.unit(None).map_err(cancelled)?;
             Ok(f.fit_from_working(fit))
         }
         None => register_here(cloud, template, opts, pause),
@@ -955,6 +963,7 @@ fn register_here(
         opts,
         free_root,
         lost: &given_lost,
+        near: std::sync::OnceLock::new(),
     };
     let mut distances = Vec::new();
     let mut chosen = 0;
@@ -1197,7 +1206,7 @@ fn register_here(
     let mut support_tree = None;
     if folded.is_some() && opts.missing {
         s.refresh().map_err(cancelled)?;
-        let (tree, rho) = support_points(&mut s, &level0_points)?;
+        let (tree, rho) = support_points(&mut s, full.near())?;
         let support = examine_support(&mut s, &tree, rho)?;
         support_tree = Some((tree, rho));
         let lost = lost_limbs(&mut s, &support, &given_lost, Folds::Unfoldable)?;
@@ -1236,7 +1245,7 @@ fn register_here(
         s.refresh().map_err(cancelled)?;
         let (tree, rho) = match support_tree.take() {
             Some(t) => t,
-            None => support_points(&mut s, &level0_points)?,
+            None => support_points(&mut s, full.near())?,
         };
         let mut support = examine_support(&mut s, &tree, rho)?;
         // The block check when every limb on it is uncovered; the limb check on the least
@@ -1347,7 +1356,7 @@ fn register_here(
     let (support, missing) = if opts.missing || any_given {
         let (tree, rho) = match support_tree {
             Some(t) => t,
-            None => support_points(&mut s, &level0_points)?,
+            None => support_points(&mut s, full.near())?,
         };
         let (mut support, lost) = match measured {
             Some((support, lost)) => (support, Some(lost)),
@@ -1370,6 +1379,9 @@ fn register_here(
     };
     s.activity.phase = "done";
     s.activity.fraction = 1.0;
+    // The labels are a pass over every point: a unit of their own (the solver's release
+    // after them falls into the caller's next unit).
+    s.unit().map_err(cancelled)?;
     let mut labels = vec![BASE_LABEL; cloud.len()];
     let mut bone_counts = vec![0usize; nb];
     for (k, &src) in s.assignment.source.iter().enumerate() {
@@ -1381,6 +1393,7 @@ fn register_here(
         labels[i as usize] = l;
         bone_counts[l as usize] += 1;
     }
+    s.unit().map_err(cancelled)?;
     Ok(Fit {
         skeleton: s.world.to_skeleton(),
         labels,
@@ -1662,26 +1675,25 @@ pub fn limb_reset(world: &WorldSkeleton, chain: usize) -> Candidate {
     }
 }
 
-/// The k-d tree and mean spacing of the points support is judged on (the level-0 points, a
-/// subsample of the figure: support is judged relative to the sampling density), built once
-/// for level 6 in one work unit.
-fn support_points(
-    s: &mut Solver,
-    points: &[Vec3],
-) -> Result<(kiddo::ImmutableKdTree<f32, 3>, f32)> {
+/// The points support is judged on (the level-0 points, a subsample of the figure: support
+/// is judged relative to the sampling density), searchable, and their mean spacing: the
+/// level-0 solvers' own [`NearPoints`] (the same points, the same k-d tree: building it again
+/// here took a work unit of up to 3 ms on 100k points), the spacing in units of
+/// `SPACING_SLICE` points.
+fn support_points(s: &mut Solver, near: &Arc<NearPoints>) -> Result<(Arc<NearPoints>, f32)> {
     s.activity.phase = "support";
-    let arr: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
-    let tree = kiddo::ImmutableKdTree::<f32, 3>::new_from_slice(&arr)
-        .map_err(|e| Error::input(format!("support: k-d tree: {e:?}")))?;
-    s.unit().map_err(cancelled)?;
+    let tree = near
+        .tree()
+        .ok_or_else(|| Error::input("support: no point to judge support on"))?;
+    let points = near.points();
     // The mean spacing (`mean_spacing`, the same bytes) in slices of `SPACING_SLICE` points.
     let n = spacing_samples(points.len());
     let mut sum = 0.0;
     for start in (0..n).step_by(SPACING_SLICE) {
-        add_spacings(points, &tree, start..start + SPACING_SLICE, &mut sum);
+        add_spacings(points, tree, start..start + SPACING_SLICE, &mut sum);
         s.unit().map_err(cancelled)?;
     }
-    Ok((tree, (sum / n.max(1) as f64) as f32))
+    Ok((near.clone(), (sum / n.max(1) as f64) as f32))
 }
 
 /// Points whose nearest-neighbour distance one work unit of [`support_points`] measures
@@ -1691,11 +1703,10 @@ const SPACING_SLICE: usize = 8 * SPACING_CHUNK;
 /// The support of every bone of the fit `s` ([`super::support`]) on the points of `tree`
 /// (mean spacing `rho`, [`support_points`]): one work unit for the set-up, then one per
 /// examination of a bone ([`SupportExam::tries`]: two for a shrunk bone).
-fn examine_support(
-    s: &mut Solver,
-    tree: &kiddo::ImmutableKdTree<f32, 3>,
-    rho: f32,
-) -> Result<Vec<BoneSupport>> {
+fn examine_support(s: &mut Solver, near: &NearPoints, rho: f32) -> Result<Vec<BoneSupport>> {
+    let tree = near
+        .tree()
+        .ok_or_else(|| Error::input("support: no point to judge support on"))?;
     s.activity.phase = "support";
     let fitted = s.world.to_skeleton();
     let exam = SupportExam::new(tree, rho, &fitted);
@@ -2314,6 +2325,9 @@ struct FullRun<'a> {
     free_root: bool,
     /// Bones known lost (`RegistrationOptions::lost`), absent in every solver.
     lost: &'a [bool],
+    /// The level-0 points made searchable, built at the first solver's start and shared by
+    /// every solver after it (the same points: the same tree, grid and spacing).
+    near: std::sync::OnceLock<Arc<NearPoints>>,
 }
 
 /// The finalists' rule: among the fits within [`NEAR_TIE`] of the lowest two-sided score,
@@ -2445,12 +2459,20 @@ impl FullRun<'_> {
             two_bone_rounds: 1,
             ..opts.solver.clone()
         };
+        // The candidates' solvers share one search structure over the subsample, built in a
+        // unit of its own (each solver's start is then a copy of the points).
+        pause.unit(None).map_err(cancelled)?;
+        let near = Arc::new(NearPoints::new(
+            idx.iter().map(|&i| self.positions[i as usize]).collect(),
+        ));
         let mut scores = Vec::with_capacity(cands.len());
         for (i, c) in cands.iter().enumerate() {
+            pause.unit(None).map_err(cancelled)?;
             let a = assignment_of(self.positions, self.normals, &idx, self.nb, self.params);
-            let mut s = Solver::new(
+            let mut s = Solver::with_near(
                 WorldSkeleton::from_skeleton(&c.skeleton),
                 a,
+                near.clone(),
                 c.scale,
                 quick_solver.clone(),
                 pause,
@@ -2485,10 +2507,19 @@ impl FullRun<'_> {
         fraction: &mut f32,
         span_all: (f32, f32),
     ) -> Result<(Vec<Candidate>, Vec<FullFit>)> {
-        let mut cands: Vec<Candidate> = ups
-            .iter()
-            .flat_map(|&up| candidates(template, points, &Init::Up(up), self.opts.front, self.lost))
-            .collect();
+        // Each up's placements are a unit of their own (on a 100k-point statue four ups
+        // took 2 to 4 ms in one).
+        let mut cands: Vec<Candidate> = Vec::new();
+        for &up in ups {
+            pause.unit(None).map_err(cancelled)?;
+            cands.extend(candidates(
+                template,
+                points,
+                &Init::Up(up),
+                self.opts.front,
+                self.lost,
+            ));
+        }
         for c in &mut cands {
             collapse(&mut c.skeleton, self.lost);
         }
@@ -2512,6 +2543,18 @@ impl FullRun<'_> {
         Ok((cands, fits))
     }
 
+    /// The level-0 points made searchable ([`NearPoints`]), built at the first call.
+    fn near(&self) -> &Arc<NearPoints> {
+        self.near.get_or_init(|| {
+            let points = self
+                .idx
+                .iter()
+                .map(|&i| self.positions[i as usize])
+                .collect();
+            Arc::new(NearPoints::new(points))
+        })
+    }
+
     /// A solver for `world` on the level-0 points, its progress at `fraction` within `span`,
     /// after three set-up units: whatever the caller did since its last unit, the
     /// assignment's copy of the points, then the solver's k-d tree and spacing.
@@ -2526,7 +2569,8 @@ impl FullRun<'_> {
         pause.unit(None).map_err(cancelled)?;
         let a0 = assignment_of(self.positions, self.normals, self.idx, self.nb, self.params);
         pause.unit(None).map_err(cancelled)?;
-        let mut s = Solver::new(world, a0, scale, self.opts.solver.clone(), pause);
+        let near = self.near().clone();
+        let mut s = Solver::with_near(world, a0, near, scale, self.opts.solver.clone(), pause);
         s.free_root = self.free_root;
         s.start_absent(self.lost);
         s.activity.fraction = fraction;

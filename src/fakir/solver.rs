@@ -18,6 +18,7 @@ use crate::cloud::grid::NearGrid;
 use crate::geometry::{Bone, PreparedBone};
 use crate::math::Vec3;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// Most points one slice of an assignment refresh scans (each point also reads its whole row
 /// of distances, so the slice is bounded even when few bones moved).
@@ -200,13 +201,10 @@ pub struct Solver<'p> {
     pub units: u64,
     /// Bones as of the last assignment refresh.
     assigned_bones: Vec<Bone>,
-    /// k-d tree of the points the solver started with (for the free-cap term).
-    tree: Option<kiddo::ImmutableKdTree<f32, 3>>,
-    /// The same points in a grid of cells of the occupancy slack ([`NearGrid`]): samples
-    /// near the data skip the tree's query.
-    grid: Option<NearGrid>,
-    tree_points: Vec<Vec3>,
-    /// Median distance between a point and its nearest neighbour (sampled).
+    /// The points the solver started with, searchable ([`NearPoints`]; shared by the
+    /// solvers of one registration's level 0).
+    near: Arc<NearPoints>,
+    /// Median distance between a point and its nearest neighbour (sampled; `near`'s).
     pub spacing: f32,
     /// Anchor of the root may move (chains whose first joint is free, e.g. the papers' chain).
     pub free_root: bool,
@@ -268,17 +266,29 @@ impl<'p> Solver<'p> {
         settings: SolverSettings,
         pause: &'p mut dyn Pause,
     ) -> Self {
+        let near = Arc::new(NearPoints::new(assignment.positions.clone()));
+        Self::with_near(world, assignment, near, scale, settings, pause)
+    }
+
+    /// [`Solver::new`] with the searchable points `near` already built (they must be
+    /// `assignment`'s positions): the solvers started on the same points share them, and
+    /// their start is not a search structure's build.
+    pub fn with_near(
+        world: WorldSkeleton,
+        assignment: Assignment,
+        near: Arc<NearPoints>,
+        scale: f32,
+        settings: SolverSettings,
+        pause: &'p mut dyn Pause,
+    ) -> Self {
+        debug_assert_eq!(near.points.len(), assignment.positions.len());
         let classes = RadiusClasses::new(&world.template);
         let trunk = trunk_bones(&world.template);
         let limits = Limits::new(&world, scale);
         let calibration_limits = Limits::with_length_range(&world, scale, 0.75, 1.33);
         let n = world.template.bones.len();
         let size = scale * template_extent(&world.template);
-        let tree_points = assignment.positions.clone();
-        let arr: Vec<[f32; 3]> = tree_points.iter().map(|p| p.to_array()).collect();
-        let tree = kiddo::ImmutableKdTree::new_from_slice(&arr).ok();
-        let spacing = tree.as_ref().map_or(0.0, |t| median_spacing(t, &arr));
-        let grid = NearGrid::new(&tree_points, OCCUPANCY_SLACK * spacing);
+        let spacing = near.spacing;
         Solver {
             size,
             classes,
@@ -299,9 +309,7 @@ impl<'p> Solver<'p> {
             free_root: false,
             trunk,
             absent: vec![false; n],
-            tree,
-            grid,
-            tree_points,
+            near,
             spacing,
             rows: RowCache::default(),
             scratch: Vec::new(),
@@ -595,15 +603,15 @@ impl<'p> Solver<'p> {
                     members: &self.members,
                     bones: energy_bones,
                     occupancy: match (
-                        &self.tree,
+                        &self.near.tree,
                         self.settings.occupancy && !self.calibrating && !occupied.is_empty(),
                     ) {
                         (Some(tree), true) => Some(OccupancyTerm {
                             bones: &occupied,
                             weights: &weights,
                             tree,
-                            grid: self.grid.as_ref(),
-                            positions: &self.tree_points,
+                            grid: self.near.grid.as_ref(),
+                            positions: &self.near.points,
                             slack: OCCUPANCY_SLACK * self.spacing,
                         }),
                         _ => None,
@@ -986,7 +994,9 @@ impl<'p> Solver<'p> {
     /// part of the model lies on the data; large when bones stick out into empty space. With
     /// the mean distance (data → model) it makes a two-sided fit measure.
     pub fn occupancy(&self) -> f64 {
-        let Some(tree) = &self.tree else { return 0.0 };
+        let Some(tree) = &self.near.tree else {
+            return 0.0;
+        };
         let bones = self.world.bones();
         let prepared: Vec<PreparedBone> = bones.iter().map(|b| b.prepare()).collect();
         let mut rng = crate::rng::Rng::new(0x0ccu64);
@@ -1011,6 +1021,7 @@ impl<'p> Solver<'p> {
                 count += 1;
                 // Nearer than the spacing: the term is zero (the grid's "yes" is exact).
                 if self
+                    .near
                     .grid
                     .as_ref()
                     .is_some_and(|g| g.within_below(sp, self.spacing))
@@ -1033,7 +1044,9 @@ impl<'p> Solver<'p> {
     /// neighbours (a short spine bone between the pelvis and the thorax) has no visible
     /// surface and is not lost, even when its `P_k` is empty.
     pub fn is_lost(&self, b: usize) -> bool {
-        let Some(tree) = &self.tree else { return false };
+        let Some(tree) = &self.near.tree else {
+            return false;
+        };
         let bones = self.world.bones();
         let prepared: Vec<PreparedBone> = bones.iter().map(|x| x.prepare()).collect();
         let limit = 3.0 * self.spacing + 0.5 * bones[b].r1.min(bones[b].r2);
@@ -1095,6 +1108,11 @@ pub const SEED_PRIOR: f32 = 0.05;
 /// Lengths tried for each seeded direction (× the bone's current length): proportions vary
 /// by ±30% between statues, and a knee seeded at the wrong distance sends the shin astray.
 pub const SEED_LENGTHS: [f32; 3] = [0.8, 1.0, 1.25];
+/// Directions whose candidates (each at the [`SEED_LENGTHS`]) one work unit of the seeding
+/// evaluates: two (six candidates, about 1 ms on 2 cores). Four made units of 1.6–2.1 ms on
+/// a 100k-point statue (`bench --only fakir/unit_100k`, 2026-12-05). Each candidate's sample
+/// seed is its index over all directions, so the grouping changes no result.
+const SEED_GROUP: usize = 2;
 /// Candidates of each side that enter the joint search of a mirrored pair.
 pub const SEED_PAIR_SHORTLIST: usize = 16;
 /// Surface samples of a candidate limb (the seeded bone and the rest of its chain) for the
@@ -1223,8 +1241,8 @@ impl Solver<'_> {
             super::init::range_excess(&t, &rest_frames, b, to_rest * *d) <= SEED_RANGE_MARGIN
         }));
         let mut out = Vec::with_capacity(dirs.len() * SEED_LENGTHS.len());
-        for (group, ds) in dirs.chunks(4).enumerate() {
-            let Some(tree) = &self.tree else {
+        for (group, ds) in dirs.chunks(SEED_GROUP).enumerate() {
+            let Some(tree) = &self.near.tree else {
                 break;
             };
             let jobs: Vec<(Vec3, f32, u64)> = ds
@@ -1235,12 +1253,12 @@ impl Solver<'_> {
                         (
                             *d,
                             len * f,
-                            ((group * 4 + k) * SEED_LENGTHS.len() + m) as u64,
+                            ((group * SEED_GROUP + k) * SEED_LENGTHS.len() + m) as u64,
                         )
                     })
                 })
                 .collect();
-            let (a, spacing, grid) = (&self.assignment, self.spacing, self.grid.as_ref());
+            let (a, spacing, grid) = (&self.assignment, self.spacing, self.near.grid.as_ref());
             let evaluated: Vec<SeedCandidate> = jobs
                 .par_iter()
                 .map(|&(d, l, seed)| {
@@ -1315,7 +1333,7 @@ impl Solver<'_> {
     /// work unit each.
     pub fn seed_chains(&mut self, chains: &[&[usize]], trusted: &[bool]) -> Result<(), Cancelled> {
         let n = self.assignment.len();
-        if n == 0 || self.tree.is_none() {
+        if n == 0 || self.near.tree.is_none() {
             return Ok(());
         }
         let stride = n.div_ceil(SEED_POINTS).max(1);
@@ -1467,6 +1485,47 @@ pub fn template_extent(t: &crate::anatomy::Template) -> f32 {
         }
     }
     (hi - lo).max_element()
+}
+
+/// A solver's points made searchable: their k-d tree, their [`NearGrid`] (cells of the
+/// occupancy slack: samples near the data skip the tree's query) and their median spacing.
+/// Built once per point set: every solver of a registration's level 0 starts on the same
+/// subsample, and shares them (an `Arc`) instead of building them again at each start (on
+/// 8,000 points the build took a work unit of about 2–3.5 ms, the kiosk's longest).
+pub struct NearPoints {
+    /// k-d tree of the points (for the free-cap and occupancy terms, the seeding and the
+    /// support); `None` when it could not be built.
+    tree: Option<kiddo::ImmutableKdTree<f32, 3>>,
+    grid: Option<NearGrid>,
+    points: Vec<Vec3>,
+    /// Median distance between a point and its nearest neighbour (sampled).
+    pub spacing: f32,
+}
+
+impl NearPoints {
+    /// The k-d tree of the points (`None` when it could not be built).
+    pub fn tree(&self) -> Option<&kiddo::ImmutableKdTree<f32, 3>> {
+        self.tree.as_ref()
+    }
+
+    /// The points, in the order they were given.
+    pub fn points(&self) -> &[Vec3] {
+        &self.points
+    }
+
+    /// Builds the tree, the spacing and the grid of `points`.
+    pub fn new(points: Vec<Vec3>) -> Self {
+        let arr: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
+        let tree = kiddo::ImmutableKdTree::new_from_slice(&arr).ok();
+        let spacing = tree.as_ref().map_or(0.0, |t| median_spacing(t, &arr));
+        let grid = NearGrid::new(&points, OCCUPANCY_SLACK * spacing);
+        NearPoints {
+            tree,
+            grid,
+            points,
+            spacing,
+        }
+    }
 }
 
 /// Median nearest-neighbour distance over up to 1000 evenly spread points.
