@@ -1109,9 +1109,9 @@ pub const SEED_PRIOR: f32 = 0.05;
 /// by ±30% between statues, and a knee seeded at the wrong distance sends the shin astray.
 pub const SEED_LENGTHS: [f32; 3] = [0.8, 1.0, 1.25];
 /// Directions whose candidates (each at the [`SEED_LENGTHS`]) one work unit of the seeding
-/// evaluates: two (six candidates, about 1 ms on 2 cores). Four made units of 1.6–2.1 ms on
-/// a 100k-point statue (`bench --only fakir/unit_100k`, 2026-12-05). Each candidate's sample
-/// seed is its index over all directions, so the grouping changes no result.
+/// evaluates: two (six candidates). Four made units of 1.6–2.1 ms on a 100k-point statue
+/// (`bench --only fakir/unit_100k`, 2026-12-05); two, 1.19 ms at most. Each candidate's
+/// sample seed is its index over all directions, so the grouping changes no result.
 const SEED_GROUP: usize = 2;
 /// Candidates of each side that enter the joint search of a mirrored pair.
 pub const SEED_PAIR_SHORTLIST: usize = 16;
