@@ -33,18 +33,23 @@ fn assignment_of(s: &SynthStatue, cone_abs: f32) -> Assignment {
     )
 }
 
-/// Fits a generic straight 4-bone chain (equal lengths 35, radii 7, pointing away from the
-/// data) anchored at the true first extremity; returns (mean distance, joint errors, units).
-fn fit_chain(s: &SynthStatue, settings: &ScheduleSettings) -> (f64, Vec<f32>, u64) {
-    let t = s.truth.template.clone();
-    let mut init = Skeleton::rest(t.clone());
+/// The papers' chain start on `s`'s chain template: a straight generic chain (lengths 35,
+/// radii 7) turned 0.9 rad away from the points.
+fn papers_chain_start(s: &SynthStatue) -> Skeleton {
+    let mut init = Skeleton::rest(s.truth.template.clone());
     for b in &mut init.bones {
         b.length = 35.0;
         b.r1 = 7.0;
         b.r2 = 7.0;
     }
     init.root_rotation = Quat::from_rotation_z(0.9);
-    let world = WorldSkeleton::from_skeleton(&init);
+    init
+}
+
+/// Fits a generic straight 4-bone chain (equal lengths 35, radii 7, pointing away from the
+/// data) anchored at the true first extremity; returns (mean distance, joint errors, units).
+fn fit_chain(s: &SynthStatue, settings: &ScheduleSettings) -> (f64, Vec<f32>, u64) {
+    let world = WorldSkeleton::from_skeleton(&papers_chain_start(s));
     let asg = assignment_of(s, 0.28);
     let mut pause = NoPause;
     let mut solver = Solver::new(world, asg, 1.0, SolverSettings::default(), &mut pause);
@@ -3695,13 +3700,7 @@ fn solvers_sharing_their_points_search_structure_fit_exactly_like_solvers_buildi
     // own k-d tree, grid and spacing, once by two solvers in turn sharing one `NearPoints`
     // (the level-0 solvers of a registration share theirs). The same sums, bit for bit.
     let s = chain4(3_000, 2, 0.0, 0.0, vec![]).unwrap();
-    let mut init = Skeleton::rest(s.truth.template.clone());
-    for b in &mut init.bones {
-        b.length = 35.0;
-        b.r1 = 7.0;
-        b.r2 = 7.0;
-    }
-    init.root_rotation = Quat::from_rotation_z(0.9);
+    let init = papers_chain_start(&s);
     let settings = ScheduleSettings::default();
     let fit = |near: Option<Arc<NearPoints>>| {
         let world = WorldSkeleton::from_skeleton(&init);
