@@ -963,6 +963,7 @@ fn register_here(
         opts,
         free_root,
         lost: &given_lost,
+        level0_points: &level0_points,
         near: std::sync::OnceLock::new(),
     };
     let mut distances = Vec::new();
@@ -2325,6 +2326,8 @@ struct FullRun<'a> {
     free_root: bool,
     /// Bones known lost (`RegistrationOptions::lost`), absent in every solver.
     lost: &'a [bool],
+    /// The level-0 points (`positions` at `idx`).
+    level0_points: &'a [Vec3],
     /// The level-0 points made searchable, built at the first solver's start and shared by
     /// every solver after it (the same points: the same tree, grid and spacing).
     near: std::sync::OnceLock<Arc<NearPoints>>,
@@ -2545,14 +2548,8 @@ impl FullRun<'_> {
 
     /// The level-0 points made searchable ([`NearPoints`]), built at the first call.
     fn near(&self) -> &Arc<NearPoints> {
-        self.near.get_or_init(|| {
-            let points = self
-                .idx
-                .iter()
-                .map(|&i| self.positions[i as usize])
-                .collect();
-            Arc::new(NearPoints::new(points))
-        })
+        self.near
+            .get_or_init(|| Arc::new(NearPoints::new(self.level0_points.to_vec())))
     }
 
     /// A solver for `world` on the level-0 points, its progress at `fraction` within `span`,
