@@ -557,6 +557,30 @@ impl WorldSkeleton {
         self.template.bones[first].chain.map(|(c, _)| c)
     }
 
+    /// The **end of the trunk** and the chains beside it (the crowded-head check): the bones
+    /// of the trunk chain ([`WorldSkeleton::trunk_chain`]) after the last one that carries
+    /// another chain — a chain whose first bone has it as parent — and the chains that bone
+    /// carries. The human's neck and head, and the arms hanging from `spine_upper`. `None`
+    /// without a trunk chain, when no bone of it carries a chain, or when its last bone does.
+    pub fn trunk_end(&self) -> Option<(Vec<usize>, Vec<usize>)> {
+        let t = &self.template;
+        let trunk = self.trunk_chain()?;
+        let line = &t.chains[trunk].bones;
+        let carried = |b: usize| -> Vec<usize> {
+            (0..t.chains.len())
+                .filter(|&c| {
+                    c != trunk
+                        && t.chains[c]
+                            .bones
+                            .first()
+                            .is_some_and(|&f| t.bones[f].parent == Some(b))
+                })
+                .collect()
+        };
+        let k = line.iter().rposition(|&b| !carried(b).is_empty())?;
+        (k + 1 < line.len()).then(|| (line[k + 1..].to_vec(), carried(line[k])))
+    }
+
     /// The chain from free bone `a` to its end **slid one bone down** (the start of the
     /// slid-limb check): `a` reaches from its first joint to the end of the next bone of its
     /// chain, each later bone takes the direction and length of the one after it, and the
@@ -916,6 +940,25 @@ impl WorldSkeleton {
             }
         }
         out.enforce();
+        out
+    }
+
+    /// `bones` (each after its parent) put back at the template's rest pose relative to
+    /// their parents, at rest length times the block scale; every other bone keeps its world
+    /// frame (its joints move with the bones above it), but for followers, which follow their
+    /// leaders before the next bone is placed (the human's neck hangs from `neck_link`, which
+    /// follows `spine_upper`). The crowded-head check's trunk.
+    pub fn at_rest(&self, bones: &[usize]) -> WorldSkeleton {
+        let mut out = self.clone();
+        for &b in bones {
+            let from_rest = match self.template.bones[b].parent {
+                Some(p) => out.frames[p] * self.rest_frames[p].inverse(),
+                None => self.root_rotation,
+            };
+            out.frames[b] = (from_rest * self.rest_frames[b]).normalize();
+            out.lengths[b] = self.rest_lengths[b] * self.block_scale;
+            out.enforce();
+        }
         out
     }
 
