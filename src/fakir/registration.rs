@@ -1285,7 +1285,6 @@ fn register_here(
         {
             let c = full.start_at(&w, s.world.block_scale);
             s = full.challenge(s, &ch, (&c, check_span(6)), &mut iterations, lower)?;
-            s.refresh().map_err(cancelled)?;
             support = examine_support(&mut s, &tree, rho)?;
         }
         // The trunk-reset check: a trunk still squeezed at its end has its chain, and all it
@@ -1301,7 +1300,6 @@ fn register_here(
             let reset = limb_reset(&s.world, chain).skeleton;
             let c = full.start_at(&WorldSkeleton::from_skeleton(&reset), s.world.block_scale);
             s = full.challenge(s, &ch, (&c, check_span(7)), &mut iterations, lower)?;
-            s.refresh().map_err(cancelled)?;
             support = examine_support(&mut s, &tree, rho)?;
         }
         if let Some(b) = limbs
@@ -1313,7 +1311,6 @@ fn register_here(
             let c = full.start_at(&s.world.slid_down(b), s.world.block_scale);
             s = full.challenge(s, &ch, (&c, check_span(8)), &mut iterations, lower)?;
             // The hanging-limb check reads the support of the fit as it now is.
-            s.refresh().map_err(cancelled)?;
             support = examine_support(&mut s, &tree, rho)?;
         }
         // The hanging-limb check: a limb bone across empty space with the rest of its chain
@@ -1325,7 +1322,6 @@ fn register_here(
         {
             let c = full.start_at(&s.world.reversed_below(a), s.world.block_scale);
             s = full.challenge(s, &ch, (&c, check_span(9)), &mut iterations, lower)?;
-            s.refresh().map_err(cancelled)?;
             support = examine_support(&mut s, &tree, rho)?;
         }
         // The stretched-end check: a limb whose last bone is too long for the one before it
@@ -1336,9 +1332,13 @@ fn register_here(
             .zip(&support)
             .map(|(&k, x)| k || x.coverage < super::support::MISSING)
             .collect();
+        // `fresh`: the support of the fit as it now is, while no check has challenged it
+        // since (a challenge may change the fit, and the support is measured again).
+        let mut fresh = Some(support);
         if let Some(a) = s.world.most_stretched_end(&skip, STRETCHED_END) {
             let c = full.start_at(&s.world.slid_out(a), s.world.block_scale);
             s = full.challenge(s, &ch, (&c, check_span(10)), &mut iterations, lower)?;
+            fresh = None;
         }
         // The crowded-head check: a trunk end (neck, head) under `PARTIAL` coverage has an
         // arm slid one joint up into it, the head pushed aside; the trunk chain is put back
@@ -1353,12 +1353,15 @@ fn register_here(
                 if bones.iter().any(|&b| settled[b]) {
                     continue;
                 }
-                s.refresh().map_err(cancelled)?;
-                let support = examine_support(&mut s, &tree, rho)?;
+                let support = match fresh.take() {
+                    Some(support) => support,
+                    None => examine_support(&mut s, &tree, rho)?,
+                };
                 if end
                     .iter()
                     .all(|&b| support[b].coverage >= super::support::PARTIAL)
                 {
+                    fresh = Some(support);
                     break;
                 }
                 let w = s
@@ -1372,10 +1375,13 @@ fn register_here(
         }
         // The dangling-end check: a limb whose last bone hangs at full size below a covered
         // bone, and that the lost-limb rules of level 6 would take, has the two share that
-        // bone's vector (the trunk and the bones known lost left out). The support measured
-        // again on the fit as it now is, as level 6 will.
-        s.refresh().map_err(cancelled)?;
-        let support = examine_support(&mut s, &tree, rho)?;
+        // bone's vector (the trunk and the bones known lost left out). The support of the fit
+        // as it now is, as level 6 will measure it (measured again only when a check above
+        // challenged the fit since the last measure).
+        let support = match fresh {
+            Some(support) => support,
+            None => examine_support(&mut s, &tree, rho)?,
+        };
         let lost = lost_limbs(&mut s, &support, &given_lost, Folds::Lost)?;
         let coverage: Vec<f32> = support.iter().map(|x| x.coverage).collect();
         let shrunk: Vec<bool> = support.iter().map(|x| x.shrunk).collect();
@@ -1758,8 +1764,11 @@ const SPACING_SLICE: usize = 8 * SPACING_CHUNK;
 
 /// The support of every bone of the fit `s` ([`super::support`]) on the points of `tree`
 /// (mean spacing `rho`, [`support_points`]): one work unit for the set-up, then one per
-/// examination of a bone ([`SupportExam::tries`]: two for a shrunk bone).
+/// examination of a bone ([`SupportExam::tries`]: two for a shrunk bone). The solver's
+/// assignment is refreshed first (nothing to do when no bone moved since), so the lost-limb
+/// rules that read it after the support see the fit the support was measured on.
 fn examine_support(s: &mut Solver, near: &NearPoints, rho: f32) -> Result<Vec<BoneSupport>> {
+    s.refresh().map_err(cancelled)?;
     let tree = near
         .tree()
         .ok_or_else(|| Error::input("support: no point to judge support on"))?;
