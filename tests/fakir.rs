@@ -2228,7 +2228,8 @@ fn crossed_limbs_are_found_and_exchanging_below_them_uncrosses_them() {
 
 #[test]
 fn a_starved_limb_whose_mirror_reached_over_to_its_place_is_found() {
-    use pygmalion::fakir::registration::{CROSSED_OVER_NEAR, STARVED};
+    use pygmalion::fakir::lost::STARVED;
+    use pygmalion::fakir::registration::CROSSED_OVER_NEAR;
     for seed in [3u64, 8, 16, 21] {
         let s = posed_human(seed, 2_000);
         let t = s.truth.template.clone();

@@ -10,7 +10,8 @@
 //! | joint-range and proportion priors | [`lm`] ([`lm::RangePrior`]) |
 //! | Algorithm 1 on a chain; whole-skeleton order with backtracking | [`schedule`] |
 //! | automatic initial placement (PCA, candidate orientations) | [`init`] |
-//! | which bones the scan covers (support), lost limbs and their completion | [`support`] |
+//! | which bones the scan covers (support), completing missing bones | [`support`] |
+//! | which bones are lost (level 6), the fit settled without them | [`lost`] |
 //! | the bust hypothesis (a portrait bust fitted without its limbs) | [`bust`] |
 //! | the pair hypotheses (both arms or legs lost, a Venus) | [`pair`] |
 //! | the broken-limb hypothesis (a limb broken part-way, curled by the fit) | [`broken`] |
@@ -23,6 +24,7 @@ pub mod bust;
 pub mod frame;
 pub mod init;
 pub mod lm;
+pub mod lost;
 pub mod pair;
 pub mod registration;
 pub mod schedule;
