@@ -71,7 +71,7 @@
 //!    one: seed 47 cut through the right thigh, told its up, scored 0.0175 after the refit
 //!    rounds, against 0.0393 for the upside-down fit kept and 0.052 for the flipped
 //!    finalist registered again. So the check goes on: the other up direction is searched
-//!    as a given up hint is (`FullRun::search_up`: the placements about it, their short
+//!    as a given up hint is (`FullRun::search`: the placements about it, their short
 //!    registrations, the best `finalists` at level 0), and the finalists' rule's pick is
 //!    registered again through level 1 and the refit rounds; it too wins with the lower
 //!    score. Over the same 12 statues (joints the scan has): seed 47 46.7% → 4.1%, seed 68
@@ -95,7 +95,7 @@
 //!    scan has), and told its true up it is fitted at 0.54%. A fit whose mean distance after
 //!    the up-down check is above [`POOR_FIT`] (0.4%) of the statue's size is searched again
 //!    about four ups tilted [`TILT`] (30°) from its own, towards its front, back and sides
-//!    (`FullRun::search_up`: each up's placements, their short registrations, the best
+//!    (`FullRun::search`: each up's placements, their short registrations, the best
 //!    `finalists` of them all at level 0); the finalists' rule's pick is registered through
 //!    level 1 and the refit rounds and wins with the lower score. Measured (30k points, CLI
 //!    defaults; the mean distance at the check, as a fraction of the size, in brackets): seed
@@ -109,6 +109,30 @@
 //!    alone. It did not run on the 13 other statues measured (seeds 5, 6 and 8, complete, at
 //!    0.06–0.20%; cuts 301, 305 and 315 at 0.20–0.34%; stylised 205 and 208, ±50% 4 and 7 at
 //!    0.16–0.40%).
+//!
+//!    **Scale search** (our choice; option `search_scales`, default ×0.8 and ×1.25; skipped
+//!    from a given skeleton): the placements take their scale from the cloud's extent along
+//!    its long axis ([`super::init`], step 2), and a figure whose proportions are far from
+//!    the template's can settle at a wrong scale that neither the scale restarts (×0.88,
+//!    ×1.12 of the chosen orientation, before the refits) nor any later pass leaves: the
+//!    stylised seed 207 (`synth --seed 207 --rigid --height 1.7 --symmetric --jitter 0.5`)
+//!    ended with its pelvis block at 1.56–1.58 times the template against its truth's 1.315,
+//!    the trunk reaching into the raised right hand (9.96% of the height in joint error), and
+//!    the squat stylised 213 upside down at 2.29 against 1.36 (44.6%). A fit whose mean
+//!    distance after the tilted-up check is still above [`POOR_FIT`] of the statue's size is
+//!    searched again from the statue's own placements (its `Init`: every principal-axis
+//!    alignment, or the headings about its up hint) rescaled by each factor about the
+//!    scale restarts' pivot (`FullRun::search`: their short registrations, the best
+//!    `finalists` of them all at level 0); the finalists' rule's pick is registered through
+//!    level 1 and the refit rounds and wins with the lower score. Measured (30k points, CLI
+//!    defaults, stylised `--symmetric --jitter 0.5`; joint error): 202 2.39% → 0.68%, 207
+//!    9.96% → 2.90%, 210 3.09% → 1.82% (its healthy right hand no longer taken lost), 213
+//!    44.6% → 2.64%, 215 4.62% → 0.80%, for 0.73 to 2.28 times the work units. These five
+//!    were every fit above the bound among 40 statues (posed 1–16, stylised 201–216, posed 1–8
+//!    with normal noise); the others end at 0.37% of their size or less. More placements
+//!    from the start instead (every alignment at ×0.8, ×1 and ×1.25, the finalists picked
+//!    among all 48) mended 202 but broke 204 (1.26% → 4.66%): they crowded the right
+//!    placement out of the finalists.
 //!
 //!    **Second facing check** (our choice; skipped like the first): a fit that ends the
 //!    rounds with its joints far outside their ranges ([`super::init::implausibility`] above
@@ -460,6 +484,11 @@ pub struct RegistrationOptions {
     pub finalists: usize,
     /// Scale factors of the scale restarts (empty: none; see [`super::init`], step 7).
     pub rescales: Vec<f32>,
+    /// Scale factors of the scale search (level 5 in the module docs; empty: none): a fit
+    /// still above [`POOR_FIT`] after the tilted-up check is searched again from the
+    /// statue's placements at each of these times their scale. Skipped from a given
+    /// skeleton.
+    pub search_scales: Vec<f32>,
     /// Refit rounds (level 5 in the module docs): at most this many rounds of fresh level-0
     /// registrations started from the fit and from its limb resets, the best kept only when
     /// it scores lower.
@@ -545,6 +574,7 @@ impl Default for RegistrationOptions {
             final_iterations: 2,
             finalists: 5,
             rescales: vec![0.88, 1.12],
+            search_scales: vec![0.8, 1.25],
             refits: 4,
             seed: 7,
             solver: SolverSettings::default(),
@@ -1083,8 +1113,8 @@ fn register_here(
     } else {
         Vec::new()
     };
-    // The checks that follow the refit rounds (the up-down and tilted-up checks, the second
-    // facing check, the crossed- and folded-limbs checks, the slid-block and slid-limb
+    // The checks that follow the refit rounds (the up-down and tilted-up checks, the scale
+    // search, the second facing check, the crossed- and folded-limbs checks, the slid-block and slid-limb
     // checks), when they may run, share the second half of what follows level 0.
     let recheck = opts.front.is_none()
         && !matches!(opts.init, Init::Given(_))
@@ -1096,10 +1126,12 @@ fn register_here(
     let slide = opts.slide && !matches!(opts.init, Init::Given(_));
     // The tilted-up check runs when nothing gave the up (no hint, no plinth, no anchor).
     let tilt = opts.flip && matches!(init, Init::Auto);
+    // The scale search: the statue's own placements at other scales.
+    let rescan = !opts.search_scales.is_empty() && !matches!(opts.init, Init::Given(_));
     // Each check that may run gets an equal share of that half, in this order.
     let checks = [
-        flip, tilt, recheck, uncross, uncross, unfold, slide, slide, slide, slide, slide, slide,
-        slide,
+        flip, tilt, rescan, recheck, uncross, uncross, unfold, slide, slide, slide, slide, slide,
+        slide, slide,
     ];
     let ran = checks.iter().filter(|&&c| c).count();
     let checks_start = if ran > 0 {
@@ -1142,7 +1174,7 @@ fn register_here(
         s = full.challenge_about(
             s,
             &ch,
-            (&template, &level0_points, &[-up]),
+            (&template, &level0_points, (&[(Init::Up(-up), 1.0)], pivot)),
             &mut cands,
             (a, b, hi),
             &mut iterations,
@@ -1154,14 +1186,36 @@ fn register_here(
     if tilt && s.mean_distance() > POOR_FIT * size as f64 {
         let (lo, hi) = check_span(1);
         let up = s.world.up();
-        let ups: Vec<Vec3> = [Vec3::X, Vec3::NEG_X, Vec3::Z, Vec3::NEG_Z]
+        let ups: Vec<(Init, f32)> = [Vec3::X, Vec3::NEG_X, Vec3::Z, Vec3::NEG_Z]
             .iter()
-            .map(|a| Quat::from_axis_angle(s.world.root_rotation * *a, TILT.to_radians()) * up)
+            .map(|a| {
+                let tilt = Quat::from_axis_angle(s.world.root_rotation * *a, TILT.to_radians());
+                (Init::Up(tilt * up), 1.0)
+            })
             .collect();
         s = full.challenge_about(
             s,
             &ch,
-            (&template, &level0_points, &ups),
+            (&template, &level0_points, (&ups, pivot)),
+            &mut cands,
+            (lo, 0.5 * (lo + hi), hi),
+            &mut iterations,
+            &mut candidate,
+        )?;
+    }
+    // The scale search (see the module docs): a fit still far from its points is searched
+    // again from the statue's own placements at other scales; the lower score wins.
+    if rescan && s.mean_distance() > POOR_FIT * size as f64 {
+        let (lo, hi) = check_span(2);
+        let searches: Vec<(Init, f32)> = opts
+            .search_scales
+            .iter()
+            .map(|&f| (init.clone(), f))
+            .collect();
+        s = full.challenge_about(
+            s,
+            &ch,
+            (&template, &level0_points, (&searches, pivot)),
             &mut cands,
             (lo, 0.5 * (lo + hi), hi),
             &mut iterations,
@@ -1176,7 +1230,7 @@ fn register_here(
         s = full.challenge(
             s,
             &ch,
-            (&c, check_span(2)),
+            (&c, check_span(3)),
             &mut iterations,
             |kept, other, t| {
                 other < kept && super::init::implausibility(&t.to_skeleton()) < implausible
@@ -1191,7 +1245,7 @@ fn register_here(
         && let Some(w) = s.world.exchanged_below(b, &mirror)
     {
         let c = full.start_at(&w, s.world.block_scale);
-        s = full.challenge(s, &ch, (&c, check_span(3)), &mut iterations, lower)?;
+        s = full.challenge(s, &ch, (&c, check_span(4)), &mut iterations, lower)?;
     }
     // The checks on limbs below all leave out the trunk's bones and the bones known lost
     // (`settled`).
@@ -1210,7 +1264,7 @@ fn register_here(
             && let Some(w) = s.world.exchanged_below(p, &mirror)
         {
             let c = full.start_at(&w, s.world.block_scale);
-            s = full.challenge(s, &ch, (&c, check_span(4)), &mut iterations, lower)?;
+            s = full.challenge(s, &ch, (&c, check_span(5)), &mut iterations, lower)?;
         }
     }
     // The folded-limbs check (see the module docs): the chain below the most folded joint
@@ -1238,7 +1292,7 @@ fn register_here(
     }
     if let Some(a) = folded {
         let c = full.start_at(&s.world.unfolded(a), s.world.block_scale);
-        s = full.challenge(s, &ch, (&c, check_span(5)), &mut iterations, lower)?;
+        s = full.challenge(s, &ch, (&c, check_span(6)), &mut iterations, lower)?;
     }
     // The slid-block and slid-limb checks (see the module docs): a limb hanging from the
     // block uncovered at its root (neither known lost nor missing) says the block sits a bone
@@ -1278,7 +1332,7 @@ fn register_here(
             && let Some(w) = s.world.slid_block()
         {
             let c = full.start_at(&w, s.world.block_scale);
-            s = full.challenge(s, &ch, (&c, check_span(6)), &mut iterations, lower)?;
+            s = full.challenge(s, &ch, (&c, check_span(7)), &mut iterations, lower)?;
             support = examine_support(&mut s, &tree, rho)?;
         }
         // The trunk-reset check: a trunk still squeezed at its end has its chain, and all it
@@ -1293,7 +1347,7 @@ fn register_here(
             // other roundings, and seed 6 without normals then ends at 1.26%, not 1.22%.
             let reset = limb_reset(&s.world, chain).skeleton;
             let c = full.start_at(&WorldSkeleton::from_skeleton(&reset), s.world.block_scale);
-            s = full.challenge(s, &ch, (&c, check_span(7)), &mut iterations, lower)?;
+            s = full.challenge(s, &ch, (&c, check_span(8)), &mut iterations, lower)?;
             support = examine_support(&mut s, &tree, rho)?;
         }
         if let Some(b) = limbs
@@ -1303,7 +1357,7 @@ fn register_here(
             .min_by(|&x, &y| support[x].coverage.total_cmp(&support[y].coverage))
         {
             let c = full.start_at(&s.world.slid_down(b), s.world.block_scale);
-            s = full.challenge(s, &ch, (&c, check_span(8)), &mut iterations, lower)?;
+            s = full.challenge(s, &ch, (&c, check_span(9)), &mut iterations, lower)?;
             // The hanging-limb check reads the support of the fit as it now is.
             support = examine_support(&mut s, &tree, rho)?;
         }
@@ -1315,7 +1369,7 @@ fn register_here(
             .most_hanging(&settled, &coverage, super::support::MISSING)
         {
             let c = full.start_at(&s.world.reversed_below(a), s.world.block_scale);
-            s = full.challenge(s, &ch, (&c, check_span(9)), &mut iterations, lower)?;
+            s = full.challenge(s, &ch, (&c, check_span(10)), &mut iterations, lower)?;
             support = examine_support(&mut s, &tree, rho)?;
         }
         // The stretched-end check: a limb whose last bone is too long for the one before it
@@ -1331,7 +1385,7 @@ fn register_here(
         let mut fresh = Some(support);
         if let Some(a) = s.world.most_stretched_end(&skip, STRETCHED_END) {
             let c = full.start_at(&s.world.slid_out(a), s.world.block_scale);
-            s = full.challenge(s, &ch, (&c, check_span(10)), &mut iterations, lower)?;
+            s = full.challenge(s, &ch, (&c, check_span(11)), &mut iterations, lower)?;
             fresh = None;
         }
         // The crowded-head check: a trunk end (neck, head) under `PARTIAL` coverage has an
@@ -1341,7 +1395,7 @@ fn register_here(
         if let Some((end, arms)) = s.world.trunk_end()
             && let Some(chain) = s.world.trunk_chain()
         {
-            let (lo, hi) = check_span(11);
+            let (lo, hi) = check_span(12);
             for (i, &arm) in arms.iter().enumerate() {
                 let bones = &template.chains[arm].bones;
                 if bones.iter().any(|&b| settled[b]) {
@@ -1400,7 +1454,7 @@ fn register_here(
         match start {
             Some(w) => {
                 let c = full.start_at(&w, s.world.block_scale);
-                s = full.challenge(s, &ch, (&c, check_span(12)), &mut iterations, lower)?;
+                s = full.challenge(s, &ch, (&c, check_span(13)), &mut iterations, lower)?;
             }
             // The fit stays as it is: level 6 takes this support and these lost bones.
             None => measured = Some((support, lost)),
@@ -1580,17 +1634,18 @@ impl FullRun<'_> {
         Ok(s)
     }
 
-    /// A search about the ups `ups` ([`FullRun::search_up`] on `points`, progress in the first
-    /// part of `progress` = `(lo, mid, hi)`) whose pick by the finalists' rule challenges the
-    /// fit `s` (progress in the second part) and wins with the lower score: the up-down and
-    /// tilted-up checks (level 5 in the module docs). The placements are appended to `cands`,
+    /// A search of the placements `searches` about a pivot ([`FullRun::search`] on `points`,
+    /// progress in the first part of `progress` = `(lo, mid, hi)`) whose pick by the
+    /// finalists' rule challenges the fit `s` (progress in the second part) and wins with the
+    /// lower score: the up-down, tilted-up and scale-search checks (level 5 in the module
+    /// docs). The placements are appended to `cands`,
     /// and `candidate` becomes the pick's when it won.
     #[allow(clippy::too_many_arguments)]
     fn challenge_about<'p>(
         &self,
         mut s: Solver<'p>,
         ch: &Challenge,
-        (template, points, ups): (&Arc<Template>, &[Vec3], &[Vec3]),
+        (template, points, searches): (&Arc<Template>, &[Vec3], Searches),
         cands: &mut Vec<Candidate>,
         (lo, mid, hi): (f32, f32, f32),
         iterations: &mut usize,
@@ -1600,8 +1655,15 @@ impl FullRun<'_> {
             return Ok(s);
         };
         let mut at = s.activity.fraction;
-        let (more, mut fits) =
-            self.search_up(template, points, ups, cands.len(), hook, &mut at, (lo, mid))?;
+        let (more, mut fits) = self.search(
+            template,
+            points,
+            searches,
+            cands.len(),
+            hook,
+            &mut at,
+            (lo, mid),
+        )?;
         s.give_pause(hook);
         cands.extend(more);
         if !fits.is_empty() {
@@ -1757,6 +1819,10 @@ fn centroid(points: &[Vec3]) -> Vec3 {
     let sum = points.iter().fold(Vec3::ZERO, |a, p| a + *p);
     sum / points.len().max(1) as f32
 }
+
+/// The placements of a search ([`FullRun::search`]): each statue placement ([`Init`]) with the
+/// factor its scale is multiplied by, and the pivot of that rescaling ([`rescaled`]).
+type Searches<'a> = (&'a [(Init, f32)], Vec3);
 
 /// What a full level-0 registration needs besides its start.
 struct FullRun<'a> {
@@ -1922,35 +1988,39 @@ impl FullRun<'_> {
         Ok(scores)
     }
 
-    /// The placements of the up directions `ups`, each searched as registration levels 1 and
-    /// 2 search a given up hint's ([`super::init::candidates`] with [`Init::Up`], one up's
-    /// placements after the other's): their short registrations ([`FullRun::quick_scores`],
-    /// progress in the first half of `span_all`), then the best `finalists` of them all
-    /// registered at level 0 (the second half). Returns the placements and the finalists'
-    /// fits, the placements numbered from `first`.
+    /// The placements of `searches`, each searched as registration levels 1 and 2 search
+    /// the statue's own ([`super::init::candidates`] with its `Init`, one search's placements
+    /// after the other's, each rescaled by its factor about the `pivot`, [`rescaled`]): their
+    /// short registrations ([`FullRun::quick_scores`], progress in the first half of
+    /// `span_all`), then the best `finalists` of them all registered at level 0 (the second
+    /// half). Returns the placements and the finalists' fits, the placements numbered from
+    /// `first`. The up-down and tilted-up checks search ups ([`Init::Up`], factor 1), the
+    /// scale search the statue's own placements at other scales.
     #[allow(clippy::too_many_arguments)]
-    fn search_up(
+    fn search(
         &self,
         template: &Arc<Template>,
         points: &[Vec3],
-        ups: &[Vec3],
+        (searches, pivot): Searches,
         first: usize,
         pause: &mut dyn Pause,
         fraction: &mut f32,
         span_all: (f32, f32),
     ) -> Result<(Vec<Candidate>, Vec<FullFit>)> {
-        // Each up's placements are a unit of their own (on a 100k-point statue four ups
+        // Each search's placements are a unit of their own (on a 100k-point statue four ups
         // took 2 to 4 ms in one).
         let mut cands: Vec<Candidate> = Vec::new();
-        for &up in ups {
+        for (init, f) in searches {
             pause.unit(None).map_err(cancelled)?;
-            cands.extend(candidates(
-                template,
-                points,
-                &Init::Up(up),
-                self.opts.front,
-                self.lost,
-            ));
+            let placed = candidates(template, points, init, self.opts.front, self.lost);
+            // (Factor 1 keeps the placements as they are, bit for bit.)
+            cands.extend(placed.into_iter().map(|c| {
+                if *f == 1.0 {
+                    c
+                } else {
+                    rescaled(&c, pivot, *f)
+                }
+            }));
         }
         for c in &mut cands {
             collapse(&mut c.skeleton, self.lost);
