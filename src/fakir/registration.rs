@@ -1113,8 +1113,8 @@ fn register_here(
     } else {
         Vec::new()
     };
-    // The checks that follow the refit rounds (the up-down and tilted-up checks, the scale
-    // search, the second facing check, the crossed- and folded-limbs checks, the slid-block and slid-limb
+    // The checks that follow the refit rounds (the up-down and tilted-up checks, the scale search,
+    // the second facing check, the crossed- and folded-limbs checks, the slid-block and slid-limb
     // checks), when they may run, share the second half of what follows level 0.
     let recheck = opts.front.is_none()
         && !matches!(opts.init, Init::Given(_))
@@ -1635,11 +1635,10 @@ impl FullRun<'_> {
     }
 
     /// A search of the placements `searches` about a pivot ([`FullRun::search`] on `points`,
-    /// progress in the first part of `progress` = `(lo, mid, hi)`) whose pick by the
-    /// finalists' rule challenges the fit `s` (progress in the second part) and wins with the
-    /// lower score: the up-down, tilted-up and scale-search checks (level 5 in the module
-    /// docs). The placements are appended to `cands`,
-    /// and `candidate` becomes the pick's when it won.
+    /// progress in the first part of `progress` = `(lo, mid, hi)`) whose pick by the finalists'
+    /// rule challenges the fit `s` (progress in the second part) and wins with the lower score: the
+    /// up-down, tilted-up and scale-search checks (level 5 in the module docs). The placements are
+    /// appended to `cands`, and `candidate` becomes the pick's when it won.
     #[allow(clippy::too_many_arguments)]
     fn challenge_about<'p>(
         &self,
