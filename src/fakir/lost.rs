@@ -198,7 +198,10 @@ pub(super) fn examine_support(
 /// to make room, so they stay lost (309's hand, cut at half its length, with them). A trial with
 /// the reach 0.3 to 0.9 and no guard (2026-11-29) lost seed 10's mended fit. A stump must also be
 /// fed: at least [`STUMP_FED`] of its present mirror's points (a bone lost whole at its joint,
-/// shrunk onto the joint's surface, holds almost none). **A bridge** (our choice, 2026-12-05): a
+/// shrunk onto the joint's surface, holds almost none), or, its mirror lost too, at least
+/// [`STUMP_FED_ALONE`] of the points the template's proportions give a bone of its size
+/// (seeds 121 and 396 cut at both wrists had one hand kept as a stump, 393 cut at both
+/// shoulders one upper arm; now lost). **A bridge** (our choice, 2026-12-05): a
 /// limb bone not hanging from the trunk, carrying bones not all lost, holding under [`STUMP_FED`]
 /// of its present mirror's points with its support reaching at most [`BRIDGE_REACH`] of its length,
 /// is lost with all it carries ([`is_bridge`]), and a mirror of a bone below it taken lost as empty
@@ -380,7 +383,9 @@ pub(super) fn lost_limbs(
 /// over another part; and a parent stretched over the bone (a forearm reaching the tip of
 /// its hand, the hand hanging beside it) leaves the bone a stub of support at its root.
 /// A stump also holds at least [`STUMP_FED`] of its present mirror's points: a bone lost
-/// whole at its joint, shrunk onto the surface there, holds almost none.
+/// whole at its joint, shrunk onto the surface there, holds almost none. With its mirror lost
+/// too (both sides broken), at least [`STUMP_FED_ALONE`] of the points expected of a bone of
+/// its size ([`unfed_alone`]).
 fn is_stump(
     s: &Solver,
     support: &[BoneSupport],
@@ -399,11 +404,45 @@ fn is_stump(
     // A stump holds the points of the part the cut left: an end holding almost none of what
     // its present mirror holds is a bone of a limb lost at its joint, shrunk onto the joint's
     // surface (which its support then reaches part-way).
-    let unfed = mirror[b]
-        .filter(|&m| !lost[m])
-        .is_some_and(|m| unfed(s, b, m));
+    // Both sides broken: without a healthy mirror, what a bone of its size would hold.
+    let unfed = match mirror[b] {
+        Some(m) if !lost[m] => unfed(s, b, m),
+        Some(_) => unfed_alone(s, lost, b),
+        None => false,
+    };
     (STUMP_REACH.0..=STUMP_REACH.1).contains(&support[b].reach) && !parent_stretched && !unfed
 }
+
+/// Whether bone `b`, whose mirror is lost too, holds under [`STUMP_FED_ALONE`] of the points
+/// expected of it: the points of the present bones (not `lost`) shared out among them and
+/// `b` in proportion to their surface areas at rest (the template's spheres; the statue's
+/// scale cancels). The stump rule of [`lost_limbs`] when both sides are broken, with no
+/// healthy mirror to count against.
+fn unfed_alone(s: &Solver, lost: &[bool], b: usize) -> bool {
+    let t = &s.world.template;
+    let rest_area = |c: usize| {
+        let d = &t.bones[c];
+        Bone::new(t.joints[d.from].rest, d.r1, t.joints[d.to].rest, d.r2).area() as f64
+    };
+    let present: Vec<usize> = (0..t.bones.len()).filter(|&c| !lost[c]).collect();
+    let area: f64 = present.iter().map(|&c| rest_area(c)).sum();
+    let expected = s.members_of(&present) as f64 * rest_area(b) / area;
+    (s.members_of(&[b]) as f64) < STUMP_FED_ALONE * expected
+}
+
+/// The least share of the points expected of it ([`unfed_alone`]) that the first lost bone of
+/// a limb whose mirror is lost too must hold to be kept as a stump. Our choice (2026-12-07),
+/// looser evidence asking for a wider margin than [`STUMP_FED`]: the expected count comes
+/// from the template's proportions, not from a healthy mirror. Measured with temporary
+/// prints (`synth --seed N --rigid --height 1.7` with two `--cut bone:B@F`, 30k points,
+/// `register`'s defaults), three bones cut whole at their joint on both sides were kept as
+/// stumps holding 0.19 (seed 121's right hand, both hands cut at the wrists), 0.12 (seed
+/// 396's left hand, the same cuts) and 0.02 (seed 393's right upper arm, both cut at the
+/// shoulders) of their expected points; bones cut part-way on both sides and taken lost
+/// held 0.03 and 0.10 (seed 401's feet cut at 0.4, beyond the stump rule's reach) and the
+/// kept ones were not taken lost at all (seed 400's hands at 0.4, seed 390's forearms at
+/// 0.5). A stump holding under a quarter of its share beside a lost mirror is lost whole.
+pub const STUMP_FED_ALONE: f64 = 0.25;
 
 /// The least share of its present mirror's points (the bone's own, not its subtree's) that
 /// the first lost bone of a limb must hold to be kept as a stump (`is_stump`). Our choice
