@@ -200,8 +200,9 @@ pub(super) fn examine_support(
 /// fed: at least [`STUMP_FED`] of its present mirror's points (a bone lost whole at its joint,
 /// shrunk onto the joint's surface, holds almost none), or, its mirror lost too, at least
 /// [`STUMP_FED_ALONE`] of the points the template's proportions give a bone of its size
-/// (seeds 121 and 396 cut at both wrists had one hand kept as a stump, 393 cut at both
-/// shoulders one upper arm; now lost). **A bridge** (our choice, 2026-12-05): a
+/// (seeds 121 and 396 cut at both wrists had one hand kept as a stump, now lost; seed 393
+/// cut at both shoulders its right upper arm, now lost, but its fit now ends with the left
+/// arm laid on the chest, covered through, and keeps it). **A bridge** (our choice, 2026-12-05): a
 /// limb bone not hanging from the trunk, carrying bones not all lost, holding under [`STUMP_FED`]
 /// of its present mirror's points with its support reaching at most [`BRIDGE_REACH`] of its length,
 /// is lost with all it carries ([`is_bridge`]), and a mirror of a bone below it taken lost as empty
