@@ -1865,6 +1865,39 @@ fn known_lost_registration() {
 }
 
 #[test]
+fn a_clavicle_whose_arm_is_lost_from_the_start_is_still_fitted() {
+    on_one_thread(|| {
+        use pygmalion::fakir::{Init, RegistrationOptions};
+        // `synth --seed 393 --rigid --height 1.7 --points 6000 --cut bone:l_upper_arm@0 --cut
+        // bone:r_upper_arm@0`, registered from its own truth with both upper arms lost from
+        // the start (`register --start TRUTH --missing l_upper_arm,r_upper_arm`): each arm
+        // chain is fitted up to where it broke, its clavicle alone (`schedule::chain_pass`).
+        // Measured when written: the clavicles 0.237 and 0.234 long against the truth's
+        // 0.252 and 0.254; before, they kept the initial pass's length, 0.199 both (0.75
+        // times the template's proportion), the mean distance twice as high.
+        let s = cut_human(393, 6_000, &[("l_upper_arm", 0.0), ("r_upper_arm", 0.0)]);
+        let t = s.truth.template.clone();
+        let fit = register_with(
+            &s,
+            RegistrationOptions {
+                lost: vec!["l_upper_arm".into(), "r_upper_arm".into()],
+                init: Init::Given(s.truth.clone()),
+                ..Default::default()
+            },
+        );
+        for name in ["l_clavicle", "r_clavicle"] {
+            let b = t.bone_index(name).unwrap();
+            let (l, truth) = (fit.skeleton.bones[b].length, s.truth.bones[b].length);
+            println!("{name}: length {l:.4}, truth {truth:.4}");
+            assert!(
+                (l / truth - 1.0).abs() < 0.12,
+                "{name}: length {l} against the truth's {truth}"
+            );
+        }
+    });
+}
+
+#[test]
 fn an_armless_figure_is_faced_across_its_breadth() {
     use pygmalion::fakir::init::{
         ACROSS_COS, FRONT_SPREAD, Init, armless_shoulders, breadth_axis, candidates,

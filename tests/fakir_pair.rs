@@ -129,13 +129,28 @@ fn a_lost_forearm_beside_a_present_one_is_tried_one_bone_down() {
     assert_eq!(h.opts.lost, vec!["r_shin", "l_shin"]);
     assert_eq!(h.mirror, "l_shin");
     assert_eq!(h.stump.as_deref(), Some("l_thigh"));
-    // A whole arm lost: the limbs' level first, then one bone down.
-    let all = hypotheses(&t, &opts, &fit_missing(&t, &["l_upper_arm"]));
+    // A whole arm lost: the limbs' level first, afresh then from the whole fit, then one
+    // bone down.
+    let whole = fit_missing(&t, &["l_upper_arm"]);
+    let all = hypotheses(&t, &opts, &whole);
     let levels: Vec<Level> = all.iter().map(|h| h.level).collect();
-    assert_eq!(levels, [Level::Limb, Level::Below]);
-    // The limbs' level searches a placement as the whole fit did.
+    assert_eq!(levels, [Level::Limb, Level::Limb, Level::Below]);
+    // The limbs' level searches a placement as the whole fit did, then starts from the whole
+    // fit's skeleton with the same bones lost and the same limb to explain.
     assert!(matches!(all[0].opts.init, Init::Auto));
-    assert_eq!(all[1].opts.lost, vec!["l_forearm", "r_forearm"]);
+    let Init::Given(start) = &all[1].opts.init else {
+        panic!(
+            "the second try starts from the whole fit, not {:?}",
+            all[1].opts.init
+        );
+    };
+    assert_eq!(start.pose().joints, whole.skeleton.pose().joints);
+    assert_eq!(all[1].opts.lost, all[0].opts.lost);
+    assert_eq!(
+        (&all[1].mirror, &all[1].stump),
+        (&all[0].mirror, &all[0].stump)
+    );
+    assert_eq!(all[2].opts.lost, vec!["l_forearm", "r_forearm"]);
 }
 
 #[test]
@@ -153,8 +168,8 @@ fn a_pair_fit_is_kept_on_its_level_s_cost_and_one_bone_down_on_a_stump() {
     };
     let mut whole = fit_missing(&t, &["l_upper_arm"]);
     whole.mean_distance = 1.0;
-    let [limb, below] = &hypotheses(&t, &opts, &whole)[..] else {
-        panic!("two hypotheses expected");
+    let [limb, limb_again, below] = &hypotheses(&t, &opts, &whole)[..] else {
+        panic!("three hypotheses expected");
     };
     let support = |shrunk: bool| -> Vec<BoneSupport> {
         let mut all = crate::common::full_support(&t);
@@ -171,8 +186,10 @@ fn a_pair_fit_is_kept_on_its_level_s_cost_and_one_bone_down_on_a_stump() {
         |h: &pygmalion::fakir::pair::Hypothesis, f: &Fit| h.keeps(&whole, f, &trunk).unwrap();
     // The limbs' level: under 1.5 times the whole fit's mean distance.
     let both_arms = ["l_upper_arm", "r_upper_arm"];
-    assert!(keeps(limb, &pair_fit(&both_arms, 1.4, false)));
-    assert!(!keeps(limb, &pair_fit(&both_arms, 1.6, false)));
+    for h in [limb, limb_again] {
+        assert!(keeps(h, &pair_fit(&both_arms, 1.4, false)));
+        assert!(!keeps(h, &pair_fit(&both_arms, 1.6, false)));
+    }
     // One bone down: under 2.5 times, and the mirror's upper arm a stump (lost or shrunk).
     let forearms = ["l_forearm", "r_forearm"];
     assert!(!keeps(below, &pair_fit(&forearms, 2.0, false)));
@@ -192,15 +209,15 @@ fn a_pair_is_not_registered_when_its_mirror_limb_explains_points_no_other_bone_c
     let mut whole = fit_missing(&t, &["l_upper_arm"]);
     // Fifty figure points (labels of bone 0, none of the base).
     whole.labels = vec![0; 50];
-    let [limb, below] = &hypotheses(&t, &opts, &whole)[..] else {
-        panic!("two hypotheses expected");
+    let [limb, limb_again, below] = &hypotheses(&t, &opts, &whole)[..] else {
+        panic!("three hypotheses expected");
     };
     let posed = Skeleton::rest(t.clone()).pose();
     let spine = posed.bones[t.bone_index("spine_upper").unwrap()];
     let trunk: Vec<Vec3> = (0..50)
         .map(|k| spine.c1 + (spine.c2 - spine.c1) * (k as f32 / 49.0))
         .collect();
-    for h in [limb, below] {
+    for h in [limb, limb_again, below] {
         let mirror = std::slice::from_ref(&h.mirror);
         assert_eq!(removal_cost(&whole, &trunk, mirror).unwrap(), 1.0);
         assert!(h.worth_trying(&whole, &trunk).unwrap(), "{:?}", h.level);
@@ -229,7 +246,7 @@ fn a_pair_is_not_registered_when_its_mirror_limb_explains_points_no_other_bone_c
     let mut cut = fit_missing(&t, &["l_upper_arm"]);
     cut.skeleton = s.truth.clone();
     cut.labels = vec![0; s.cloud.len()];
-    for h in [limb, below] {
+    for h in [limb, limb_again, below] {
         let mirror = std::slice::from_ref(&h.mirror);
         let cost = removal_cost(&cut, &s.cloud.positions, mirror).unwrap();
         assert!(

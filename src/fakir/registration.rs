@@ -405,8 +405,9 @@
 //!    reports both arms and both legs missing.
 //! 8. **The pair hypothesis** ([`super::pair`], when no bust fit was kept): a whole fit that
 //!    lost an upper arm or a thigh with all it carries, its mirror limb whole, is registered
-//!    again with both lost from the start; that fit is the result when it explains the
-//!    points the mirror had taken ([`super::bust::limb_excess`] under
+//!    again with both lost from the start (afresh, then, that fit not kept, from the whole
+//!    fit's skeleton: [`super::pair::from_whole`]); that fit is the result when it explains
+//!    the points the mirror had taken ([`super::bust::limb_excess`] under
 //!    [`super::pair::EXPLAINED`]) at a mean distance under [`super::pair::COST`] times the
 //!    whole fit's. The *Venus de Milo* then reports both arms missing. When that does not
 //!    apply or its fit is not kept, the same one bone down ([`super::pair::Level::Below`]): a
@@ -826,9 +827,9 @@ fn working_frame(cloud: &PointCloud) -> Option<WorkingFrame> {
 /// again without the template's bust limbs, and that fit is kept when it explains the points
 /// the limbs had taken at a mean distance not far above the whole fit's; then (no bust fit
 /// kept) the pair hypotheses ([`super::pair::hypotheses`]): a fit that lost an upper arm or a
-/// thigh beside a whole mirror is registered again with both lost, kept on the same two
-/// tests; else one that lost a forearm or a shin, one bone down, kept on
-/// [`super::pair::Hypothesis::keeps`]'s. Each only when
+/// thigh beside a whole mirror is registered again with both lost (afresh, then from the
+/// whole fit), kept on the same two tests; else one that lost a forearm or a shin, one bone
+/// down, kept on [`super::pair::Hypothesis::keeps`]'s. Each only when
 /// [`super::pair::Hypothesis::worth_trying`]. Last (no other fit kept), the broken-limb
 /// hypothesis ([`super::broken`]): a limb pulled short by its fit is registered again with
 /// one more of its bones lost, kept when its mean distance falls clearly.

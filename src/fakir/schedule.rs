@@ -101,9 +101,22 @@ pub fn chain_initial_pass(s: &mut Solver, chain: &[usize]) -> Result<(), Cancell
 
 /// One forward (`reverse = false`) or backward pass of two-bone fits, then the one-bone fit of
 /// the extremity reached (Algorithm 1, lines 13–19).
+///
+/// **Our choice: a chain of one anchored bone refits its free end both ways.** A limb lost
+/// below its first bone (an arm lost at the shoulder, a shin lost at the knee) is fitted up
+/// to where it broke ([`Solver::present_prefix`]): one bone, hanging from the trunk. Such a
+/// chain has no two-bone fit, and the backward pass's extremity is its first end, which only
+/// a bone leaving a free root may move ([`Solver::first_end_free`]): the pass did nothing,
+/// [`chain_passes`] stopped after it, and the bone kept the length of the initial forward
+/// pass, clamped to `[0.75, 1.33]` times the template's proportion (a synthetic statue
+/// whose upper arms were cut at the shoulders, registered with them lost: both clavicles
+/// ended at 0.75 times their expected length, 0.199 against the truth's 0.252 and 0.254).
+/// Its backward pass now fits the free end, like the forward pass.
 pub fn chain_pass(s: &mut Solver, chain: &[usize], reverse: bool) -> Result<(), Cancelled> {
     let k = chain.len();
-    if reverse {
+    if reverse && k == 1 && !s.first_end_free(chain[0]) {
+        s.one_bone(chain[0], End::Second, false)?;
+    } else if reverse {
         for i in (0..k.saturating_sub(1)).rev() {
             s.two_bone(chain[i], chain[i + 1])?;
         }

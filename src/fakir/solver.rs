@@ -741,7 +741,7 @@ impl<'p> Solver<'p> {
                 }
                 End::First => {
                     // Free first joint: only a bone leaving a free root can move it.
-                    if !(self.free_root && self.world.template.bones[b].parent.is_none()) {
+                    if !self.first_end_free(b) {
                         break;
                     }
                     let axes =
@@ -1036,6 +1036,13 @@ impl<'p> Solver<'p> {
             }
         }
         if count == 0 { 0.0 } else { sum / count as f64 }
+    }
+
+    /// Whether the one-bone fit may move bone `b`'s first joint: only a bone leaving a free
+    /// root (the papers' chain experiment) can; every other first joint is held by its
+    /// parent or by the root block.
+    pub fn first_end_free(&self, b: usize) -> bool {
+        self.free_root && self.world.template.bones[b].parent.is_none()
     }
 
     /// Whether bone `b` lies in empty space: fewer than a quarter of the samples of its
