@@ -860,11 +860,25 @@ fn register_in(
             return Ok(bust);
         }
     }
+    // The last judgement of worth_trying, by level and mirror: the hypothesis started from
+    // the whole fit shares its level and mirror with the one afresh before it.
+    let mut judged: Option<(super::pair::Level, String, bool)> = None;
     for hypothesis in super::pair::hypotheses(&template, opts, &whole) {
         // Not worth a registration when the mirror limb explains points that no other bone
         // of the whole fit comes near (a healthy arm or leg).
-        let worth = hypothesis.worth_trying(&whole, &cloud.positions)?;
-        pause.unit(None).map_err(cancelled)?;
+        let worth = match &judged {
+            Some((level, mirror, worth))
+                if *level == hypothesis.level && *mirror == hypothesis.mirror =>
+            {
+                *worth
+            }
+            _ => {
+                let worth = hypothesis.worth_trying(&whole, &cloud.positions)?;
+                pause.unit(None).map_err(cancelled)?;
+                judged = Some((hypothesis.level, hypothesis.mirror.clone(), worth));
+                worth
+            }
+        };
         if !worth {
             continue;
         }
