@@ -103,7 +103,10 @@ fn a_statue_loads_fits_within_budget_binds_animates_and_is_cached() {
     let mut shown: Vec<u32> = Vec::new();
     // The attempts seen, and where each one's percentages start in `shown`.
     let (mut attempts, mut starts) = (Vec::new(), Vec::new());
-    run_until(&mut a, Duration::from_secs(240), |w| {
+    // A guard against a kiosk that never gets there, not a speed target (those are the
+    // bench's): the registration gets 4 ms a frame. Measured on this 2-core machine
+    // (2026-12-07): 213 s alone; past 240 s, the old limit, beside a build.
+    run_until(&mut a, Duration::from_secs(600), |w| {
         let mut q = w.query::<&CurrentPose>();
         if let Some(p) = q.iter(w).next() {
             let j = p.0.pose().joints[0];
