@@ -98,11 +98,11 @@
 //!    (`FullRun::search`: each up's placements, their short registrations, the best
 //!    `finalists` of them all at level 0); the finalists' rule's pick is registered through
 //!    level 1 and the refit rounds and wins with the lower score. A fit with no level-1 pass
-//!    (a cloud within the subsample) is always searched, and so is it by the scale search
-//!    below ([`poor`]: its distances are not measured yet, and judging it by them made small
-//!    statues' fits worse). Measured (30k points, CLI
-//!    defaults; the mean distance at the check, as a fraction of the size, in brackets): seed
-//!    303 (0.70%) 7.50% → 0.77%; seed 318, left shin cut at 0.8 (0.45%), 8.26% → 0.53%;
+//!    (a cloud within the subsample) is always searched, by this check and by the scale
+//!    search below ([`poor`]: its distances are not measured yet there, and judging it by
+//!    them made small statues' fits worse). Measured (30k points, CLI defaults; the mean
+//!    distance at the check, as a fraction of the size, in brackets): seed 303 (0.70%)
+//!    7.50% → 0.77%; seed 318, left shin cut at 0.8 (0.45%), 8.26% → 0.53%;
 //!    stylised figures (`--symmetric --jitter 0.5`) seed 204 (0.59%) 27.5% → 1.26%, no longer
 //!    reporting a healthy foot lost, and ±50% proportions (`--jitter 0.5`) seed 10 (0.44%)
 //!    9.77% → 2.14%, no longer reporting a healthy arm lost, seed 11 (0.55%) 14.1% → 6.6%,
@@ -1892,18 +1892,16 @@ pub const POOR_FIT: f64 = 0.004;
 /// distance, as of the solver's last refresh, above [`POOR_FIT`] of the statue's `size`.
 ///
 /// A fit whose solver was never refreshed has no distances yet (all infinite) and is taken
-/// poor: a fit with no level-1 pass (a cloud within the level-0 `subsample`, whose points are
-/// all at level 0 already, or `final_iterations` 0) comes from a solver that
-/// [`FullRun::level1`] started afresh, and the refresh at the end of the registration has not
-/// run yet. So both searches run on every such fit without an up hint. Found and measured in
-/// stop 71; kept on purpose, because judging such fits by their distances makes them worse.
-/// Five statues (`synth --seed N --rigid --height 1.7 --points 3000`, seeds 4-8, CLI
-/// defaults) were refreshed and judged by the bound: neither search ran on any of them. The
-/// fits were 1.0 to 3.8 times
-/// faster (seed 4: 26.1 s down to 6.8 s), and their final mean distances were 0.05% to
-/// 0.15% of their size. Seeds 4 and 5 ended at 0.69% and 0.63% of the height in joint error,
-/// against 0.23% and 0.42% with the searches. Seeds 6, 7 and 8 gave the same fits. A fit with a level 1 keeps its distances as of its last level-1 pass, as
-/// when [`POOR_FIT`] was measured.
+/// poor. That is the case of a fit with no level-1 pass (a cloud within the level-0
+/// `subsample`, or `final_iterations` 0): [`FullRun::level1`] starts its solver afresh, and the
+/// refresh at the end of the registration has not run yet. So both searches run on every such
+/// fit without an up hint. Found in stop 71 and kept on purpose: judged by their refreshed
+/// distances, five statues (`synth --seed N --rigid --height 1.7 --points 3000`, seeds 4-8, CLI
+/// defaults) ran neither search and were fitted 1.0 to 3.8 times faster (seed 4: 26.1 s down
+/// to 6.8 s), but seeds 4 and 5 ended at 0.69% and 0.63% of the height in joint error against
+/// 0.23% and 0.42% with the searches (seeds 6-8: the same fits). A fit with a level 1 keeps its
+/// distances as of its last level-1 pass, as when [`POOR_FIT`] was measured; forcing both
+/// searches on such fits (stylised seeds 205 and 208, 10k points) changed neither fit.
 fn poor(s: &Solver, size: f32) -> bool {
     let d = s.mean_distance();
     !d.is_finite() || d > POOR_FIT * size as f64
