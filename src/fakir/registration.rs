@@ -1885,14 +1885,15 @@ fn preferred(fits: &[FullFit]) -> usize {
 pub const OVERREACH: f32 = 0.25;
 
 /// The mean distance (a fraction of the statue's size: the placement's scale times the
-/// template's extent) above which a fit is poor and the tilted-up check runs (module docs).
+/// template's extent) above which a fit is poor (`poor`) and the tilted-up check and the
+/// scale search run (module docs).
 pub const POOR_FIT: f64 = 0.004;
 
 /// Whether the fit `s` is poor (the tilted-up check and the scale search then run): its mean
 /// distance, as of the solver's last refresh, above [`POOR_FIT`] of the statue's `size`.
 ///
-/// A fit whose solver was never refreshed has no distances yet (all infinite) and is taken
-/// poor. That is the case of a fit with no level-1 pass (a cloud within the level-0
+/// A fit whose solver was never refreshed has no distances yet (all infinite: above any
+/// bound) and is taken poor. That is the case of a fit with no level-1 pass (a cloud within the level-0
 /// `subsample`, or `final_iterations` 0): [`FullRun::level1`] starts its solver afresh, and the
 /// refresh at the end of the registration has not run yet. So both searches run on every such
 /// fit without an up hint. Found in stop 71 and kept on purpose: judged by their refreshed
@@ -1904,8 +1905,7 @@ pub const POOR_FIT: f64 = 0.004;
 /// searches on one that passed the bound (stylised seed 208, 10k points) gave the same fit for
 /// 1.85 times the work units.
 fn poor(s: &Solver, size: f32) -> bool {
-    let d = s.mean_distance();
-    !d.is_finite() || d > POOR_FIT * size as f64
+    s.mean_distance() > POOR_FIT * size as f64
 }
 
 /// How far (degrees) the tilted-up check tilts the fit's up (module docs).
