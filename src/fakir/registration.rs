@@ -1893,17 +1893,17 @@ pub const POOR_FIT: f64 = 0.004;
 /// distance, as of the solver's last refresh, above [`POOR_FIT`] of the statue's `size`.
 ///
 /// A fit whose solver was never refreshed has no distances yet (all infinite: above any
-/// bound) and is taken poor. That is the case of a fit with no level-1 pass (a cloud within the level-0
-/// `subsample`, or `final_iterations` 0): [`FullRun::level1`] starts its solver afresh, and the
-/// refresh at the end of the registration has not run yet. So both searches run on every such
-/// fit without an up hint. Found in stop 71 and kept on purpose: judged by their refreshed
-/// distances, five statues (`synth --seed N --rigid --height 1.7 --points 3000`, seeds 4-8, CLI
-/// defaults) ran neither search and were fitted 1.0 to 3.8 times faster (seed 4: 26.1 s down
-/// to 6.8 s), but seeds 4 and 5 ended at 0.69% and 0.63% of the height in joint error against
-/// 0.23% and 0.42% with the searches (seeds 6-8: the same fits). A fit with a level 1 keeps its
-/// distances as of its last level-1 pass, as when [`POOR_FIT`] was measured; forcing both
-/// searches on one that passed the bound (stylised seed 208, 10k points) gave the same fit for
-/// 1.85 times the work units.
+/// bound) and is taken poor. That is the case of a fit with no level-1 pass (a cloud within
+/// the level-0 `subsample`, or `final_iterations` 0): [`FullRun::level1`] starts its solver
+/// afresh, and the refresh at the end of the registration has not run yet. So both searches
+/// run on every such fit without an up hint. Found on 2026-12-08 and kept on purpose:
+/// judged by their refreshed distances, five statues (`synth --seed N --rigid --height 1.7
+/// --points 3000`, seeds 4-8, CLI defaults) ran neither search and were fitted 1.0 to 3.8
+/// times faster (seed 4: 26.1 s down to 6.8 s), but seeds 4 and 5 ended at 0.69% and 0.63%
+/// of the height in joint error against 0.23% and 0.42% with the searches (seeds 6-8: the
+/// same fits). A fit with a level 1 keeps its distances as of its last level-1 pass, as
+/// when [`POOR_FIT`] was measured; forcing both searches on one that passed the bound
+/// (stylised seed 208, 10k points) gave the same fit for 1.85 times the work units.
 fn poor(s: &Solver, size: f32) -> bool {
     s.mean_distance() > POOR_FIT * size as f64
 }

@@ -496,9 +496,10 @@ impl<'p> Solver<'p> {
         Ok(())
     }
 
-    /// Total energy over all assigned points (thesis eq. 2.4), as of the last refresh. Before
-    /// the first refresh of its assignment (a solver just started, or given a new assignment
-    /// by [`Solver::set_assignment`]) every distance is infinite, and so is this.
+    /// Mean distance of the assigned points to their bones (thesis eq. 2.16), as of the last
+    /// refresh (0 with no point). Before the first refresh of its assignment (a solver just
+    /// started, or given a new assignment by [`Solver::set_assignment`]) every distance is
+    /// infinite, and so is this.
     pub fn mean_distance(&self) -> f64 {
         self.assignment.mean_distance()
     }
